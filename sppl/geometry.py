@@ -1,0 +1,115 @@
+"""Posed primitive parts, their unit meshes, and ground-plane footprints.
+
+Every primitive is a *unit* shape resting on the ground: its lowest point is at z = 0 and its
+axis is the z axis. A part poses one unit shape with a 4x4 world-from-unit matrix that includes
+the scale, so a class's geometry is a few multiplications per object and the renderer uploads
+each unit mesh once.
+
+Unit shapes (before the part's matrix):
+- ``box``: x and y in [-1/2, 1/2], z in [0, 1] (scale by width, depth, height);
+- ``cylinder``: radius 1, z in [0, 1] (scale by radius, radius, height);
+- ``cone``: base radius 1 at z = 0, apex at z = 1 (scale by radius, radius, height);
+- ``sphere``: radius 1 centred at z = 1 (scale by the radius: it then rests on the ground).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cache
+
+import numpy as np
+import shapely
+import trimesh
+
+PRIMITIVES = ("box", "cylinder", "cone", "sphere")
+
+# Round shapes are drawn and footprinted as polygons with this many sides: enough that the
+# polygon differs from the circle by under 0.2% of the radius.
+ROUND_SECTIONS = 48
+
+
+@dataclass(frozen=True, eq=False)
+class Part:
+    """One posed, coloured primitive of an object."""
+
+    primitive: str
+    matrix: np.ndarray  # (4, 4) world-from-unit, scale included
+    colour: tuple[float, float, float]
+
+
+def translation(x: float, y: float, z: float) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, 3] = (x, y, z)
+    return m
+
+
+def rotation_z(angle: float) -> np.ndarray:
+    """Counter-clockwise rotation about +z, seen from above (right-handed)."""
+    c, s = math.cos(angle), math.sin(angle)
+    m = np.eye(4)
+    m[:2, :2] = ((c, -s), (s, c))
+    return m
+
+
+def rotation(axis: tuple[float, float, float], angle: float) -> np.ndarray:
+    return trimesh.transformations.rotation_matrix(angle, axis)
+
+
+def scaling(sx: float, sy: float, sz: float) -> np.ndarray:
+    return np.diag([sx, sy, sz, 1.0])
+
+
+@cache
+def unit_mesh(primitive: str) -> trimesh.Trimesh:
+    """The unit shape of a primitive, as a trimesh (cached: built once per process)."""
+    if primitive == "box":
+        mesh = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+        mesh.apply_translation((0.0, 0.0, 0.5))
+    elif primitive == "cylinder":
+        mesh = trimesh.creation.cylinder(radius=1.0, height=1.0, sections=ROUND_SECTIONS)
+        mesh.apply_translation((0.0, 0.0, 0.5))
+    elif primitive == "cone":
+        mesh = trimesh.creation.cone(radius=1.0, height=1.0, sections=ROUND_SECTIONS)
+    elif primitive == "sphere":
+        mesh = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+        mesh.apply_translation((0.0, 0.0, 1.0))
+    else:
+        raise KeyError(f"unknown primitive {primitive!r}; expected one of {', '.join(PRIMITIVES)}")
+    return mesh
+
+
+@cache
+def _outline(primitive: str) -> np.ndarray:
+    """Points of the unit shape whose convex hull, seen from above, is its footprint.
+
+    Exact for the box; for round shapes, the inscribed regular polygon at their widest height.
+    Kept in homogeneous coordinates so a part's matrix poses them directly.
+    """
+    if primitive == "box":
+        xy = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
+        zs = (0.0, 1.0)
+    else:
+        t = np.linspace(0.0, 2.0 * math.pi, ROUND_SECTIONS, endpoint=False)
+        xy = np.stack([np.cos(t), np.sin(t)], axis=1)
+        zs = {"cylinder": (0.0, 1.0), "cone": (0.0,), "sphere": (1.0,)}[primitive]
+    pts = [np.column_stack([xy, np.full(len(xy), z), np.ones(len(xy))]) for z in zs]
+    return np.concatenate(pts)
+
+
+def footprint_of(parts: tuple[Part, ...] | list[Part]) -> np.ndarray:
+    """The convex ground-plane footprint of some parts: an (M, 2) counter-clockwise polygon."""
+    pts = np.concatenate([(_outline(p.primitive) @ p.matrix.T)[:, :2] for p in parts])
+    hull = shapely.convex_hull(shapely.MultiPoint(pts))
+    return np.asarray(shapely.get_coordinates(hull.exterior if hasattr(hull, "exterior") else hull))
+
+
+def polygon(points: np.ndarray) -> shapely.Polygon:
+    return shapely.Polygon(points)
+
+
+def footprints_overlap(a: shapely.Polygon, b: shapely.Polygon) -> bool:
+    """Whether two footprints share area (touching along an edge or at a point does not count)."""
+    if not a.intersects(b):
+        return False
+    return a.intersection(b).area > 1e-12

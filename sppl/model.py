@@ -1,0 +1,140 @@
+"""A compiled scene model: what the engine, the renderer and the commands work from.
+
+The language front end (``sppl.lang``) turns a ``.scn`` file into a ``Model``; nothing
+downstream looks at the parse tree or knows the name of any concrete class. Everything the
+engine needs to derive its moves is here: each class's parameters with their domains, priors and
+proposal scales, its Poisson rate, how to build its geometry from parameter values, and each
+sensor's likelihood with the priors on its noise parameters.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .distributions import Categorical, Distribution
+from .domains import Domain, is_continuous
+from .geometry import Part, footprint_of
+
+Values = Mapping[str, Any]
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One random choice of an object (or of a sensor's noise): its domain, prior and step."""
+
+    name: str
+    domain: Domain
+    prior: Distribution
+    proposal_scale: float = 0.1
+
+    @property
+    def continuous(self) -> bool:
+        return is_continuous(self.domain)
+
+    def log_prob(self, value: Any) -> float:
+        if not self.domain.contains(value):
+            return -math.inf
+        return self.prior.log_prob(value)
+
+
+@dataclass(frozen=True, eq=False)
+class ObjectClass:
+    """A class of object that may appear in a scene any number of times.
+
+    ``build`` maps a dict of parameter values to the posed, coloured parts that are rendered;
+    ``footprint`` (optional) maps them to the convex polygon, an (M, 2) array of ground-plane
+    points, used by the no-overlap constraint. Without it the footprint is the convex hull of
+    the parts seen from above.
+    """
+
+    name: str
+    rate: float
+    parameters: tuple[Parameter, ...]
+    build: Callable[[Values], tuple[Part, ...]]
+    footprint_fn: Callable[[Values], np.ndarray] | None = None
+
+    def parameter(self, name: str) -> Parameter | None:
+        for p in self.parameters:
+            if p.name == name:
+                return p
+        return None
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.parameters)
+
+    def sample_prior(self, rng: np.random.Generator) -> dict[str, Any]:
+        return {p.name: p.prior.sample(rng) for p in self.parameters}
+
+    def log_prior(self, values: Values) -> float:
+        return sum(p.log_prob(values[p.name]) for p in self.parameters)
+
+    def parts(self, values: Values) -> tuple[Part, ...]:
+        return tuple(self.build(values))
+
+    def footprint(self, values: Values) -> np.ndarray:
+        if self.footprint_fn is not None:
+            return np.asarray(self.footprint_fn(values), dtype=float)
+        return footprint_of(self.parts(values))
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """A sensor modality ('image' or 'depth'): its likelihood by name and its noise choices."""
+
+    kind: str
+    likelihood: str
+    noise: tuple[Parameter, ...]
+    options: Mapping[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class InferenceSettings:
+    """Knobs of the derived sampler (thesis Algorithms 1, 2 and 7)."""
+
+    p_jump: float = 1.0 / 20.0
+    # Relative weights of birth, death and change among model jumps (thesis: equal).
+    jump_weights: Mapping[str, float] = field(
+        default_factory=lambda: {"birth": 1.0, "death": 1.0, "change": 1.0}
+    )
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ambient: float = 0.35
+    # Direction *towards* the light, in world coordinates.
+    light: tuple[float, float, float] = (0.4, -0.3, 1.0)
+
+
+@dataclass(frozen=True, eq=False)
+class Model:
+    classes: tuple[ObjectClass, ...]
+    sensors: Mapping[str, Sensor]
+    inference: InferenceSettings = field(default_factory=InferenceSettings)
+    render: RenderSettings = field(default_factory=RenderSettings)
+    colours: Mapping[str, tuple[float, float, float]] = field(default_factory=dict)
+    # The hard constraint of thesis 3.1.3: no two objects' footprints share area.
+    no_overlap: bool = False
+    path: Path | None = None
+    source: str = ""
+
+    def object_class(self, name: str) -> ObjectClass:
+        for c in self.classes:
+            if c.name == name:
+                return c
+        raise KeyError(name)
+
+    @property
+    def class_names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.classes)
+
+
+def uniform_categorical(values: tuple[str, ...]) -> Categorical:
+    return Categorical(values, tuple(1.0 / len(values) for _ in values))
