@@ -1,0 +1,124 @@
+"""The Markov chain: the schedule of thesis Algorithms 1, 2 and 7 over the derived moves.
+
+One *sweep* is: a parameter move for every object (each block of its parameters in turn);
+then, with probability ``p_jump``, one model jump (birth, death or change, by their weights);
+then a move of every noise parameter. ``Sampler.sweep`` performs one sweep.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import moves
+from .model import Model
+from .trace import Trace, noise_log_prior, objects_log_prior, overlaps_any
+
+
+@dataclass
+class MoveStats:
+    """Proposed and accepted counts per (move type, class or sensor)."""
+
+    counts: dict[tuple[str, str], list[int]] = field(default_factory=lambda: defaultdict(lambda: [0, 0]))
+
+    def record(self, move: str, label: str, accepted: bool) -> None:
+        c = self.counts[(move, label)]
+        c[0] += 1
+        c[1] += int(accepted)
+
+    def by_move(self) -> dict[str, tuple[int, int]]:
+        out: dict[str, list[int]] = defaultdict(lambda: [0, 0])
+        for (move, _), (n, a) in self.counts.items():
+            out[move][0] += n
+            out[move][1] += a
+        return {m: (n, a) for m, (n, a) in out.items()}
+
+    def as_dict(self) -> dict:
+        return {f"{m}/{lab}": {"proposed": n, "accepted": a} for (m, lab), (n, a) in self.counts.items()}
+
+
+class Sampler:
+    """Advances one chain. ``scorer`` renders and scores; ``rng`` is the chain's only randomness."""
+
+    def __init__(self, model: Model, scorer, rng: np.random.Generator) -> None:
+        self.model = model
+        self.scorer = scorer
+        self.rng = rng
+        self.stats = MoveStats()
+        self.jump = moves.jump_probabilities(model)
+
+    # -- states --------------------------------------------------------------------------------
+
+    def initial_trace(self, objects=()) -> Trace:
+        """The thesis's starting point: the given objects (default: an empty scene) and noise
+        parameters drawn from their priors."""
+        noise = {
+            kind: {p.name: p.prior.sample(self.rng) for p in sensor.noise}
+            for kind, sensor in self.model.sensors.items()
+        }
+        return self.make_trace(tuple(objects), noise)
+
+    def make_trace(self, objects, noise, stats=None) -> Trace:
+        if stats is None:
+            stats = self.scorer.statistics(objects)
+        log_prior = objects_log_prior(self.model, objects) + noise_log_prior(self.model, noise)
+        return Trace(
+            self.model, tuple(objects), noise, stats, log_prior,
+            self.scorer.log_likelihood(stats, noise),
+        )
+
+    def evaluate(self, trace: Trace, proposal: moves.Proposal) -> Trace | None:
+        """The proposed trace, or None where its prior is zero (out of a domain, overlapping),
+        which is decided before anything is rendered."""
+        if any(not math.isfinite(o.log_prior) for o in proposal.changed):
+            return None
+        if self.model.no_overlap and any(overlaps_any(o, proposal.objects) for o in proposal.changed):
+            return None
+        log_prior = objects_log_prior(self.model, proposal.objects) + noise_log_prior(
+            self.model, proposal.noise
+        )
+        if not math.isfinite(log_prior):
+            return None
+        if proposal.move == "noise":
+            stats = trace.stats
+        else:
+            stats = self.scorer.statistics(proposal.objects)
+        log_lik = self.scorer.log_likelihood(stats, proposal.noise)
+        return Trace(self.model, proposal.objects, proposal.noise, stats, log_prior, log_lik)
+
+    def step(self, trace: Trace, proposal: moves.Proposal | None) -> Trace:
+        """Metropolis-Hastings accept/reject, in log space; NaN is never accepted."""
+        if proposal is None:
+            return trace
+        new = self.evaluate(trace, proposal)
+        accepted = False
+        if new is not None:
+            log_alpha = new.score - trace.score + proposal.log_q_ratio
+            accepted = bool(log_alpha >= 0.0 or math.log(self.rng.random()) < log_alpha)
+        self.stats.record(proposal.move, proposal.label, accepted)
+        return new if accepted else trace
+
+    # -- the schedule -------------------------------------------------------------------------
+
+    def sweep(self, trace: Trace) -> Trace:
+        m, rng = self.model, self.rng
+        for k in range(len(trace.objects)):
+            for block in moves.parameter_blocks(trace.objects[k].cls):
+                trace = self.step(trace, moves.propose_parameters(m, trace, k, block, rng))
+        if rng.random() < m.inference.p_jump:
+            trace = self.step(trace, self.propose_jump(trace))
+        for kind, sensor in m.sensors.items():
+            for p in sensor.noise:
+                trace = self.step(trace, moves.propose_noise(m, trace, kind, p.name, rng))
+        return trace
+
+    def propose_jump(self, trace: Trace) -> moves.Proposal | None:
+        u = self.rng.random()
+        if u < self.jump["birth"]:
+            return moves.propose_birth(self.model, trace, self.rng)
+        if u < self.jump["birth"] + self.jump["death"]:
+            return moves.propose_death(self.model, trace, self.rng)
+        return moves.propose_change(self.model, trace, self.rng)

@@ -1,0 +1,160 @@
+"""The ``sppl`` command: check, simulate and sample.
+
+Exit status: 0 on success, 1 on an error in the user's input (one message on stderr, no
+traceback unless ``--debug``), 2 on a usage error, 130 when interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import shutil
+import sys
+from pathlib import Path
+
+from . import __version__
+from .errors import SpplError, UsageError
+
+EPILOG = """\
+exit status: 0 success, 1 bad input (model, observations, options), 2 usage, 130 interrupted.
+Documentation: docs/ in the source tree (tutorial, language, inference, observations)."""
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="sppl",
+        description="Bayesian scene understanding: posteriors over the objects in a scene, "
+        "from a scene model (.scn) and calibrated RGB and depth observations.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--version", action="version", version=f"sppl {__version__}")
+    p.add_argument("--debug", action="store_true", help="show tracebacks and debug logging")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    c = sub.add_parser("check", help="parse and validate a model file, list its classes")
+    c.add_argument("model", type=Path, help="the model file (.scn)")
+
+    s = sub.add_parser(
+        "simulate",
+        help="draw a scene (or take one), render every camera, add sensor noise, write obs/",
+    )
+    s.add_argument("model", type=Path)
+    s.add_argument("--cameras", type=Path, required=True,
+                   help="cameras file (transforms.json layout; frames need no image files)")
+    s.add_argument("--out", type=Path, required=True, help="observation folder to write")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--scene", type=Path, help="a scene file to render instead of a prior draw")
+    s.add_argument("--depth-format", choices=("npy", "png"), default="npy",
+                   help="depth files: float32 metres (npy) or uint16 millimetres (png)")
+    s.add_argument("--force", action="store_true", help="replace --out if it exists")
+
+    r = sub.add_parser("sample", help="draw posterior samples of the scene given observations")
+    r.add_argument("model", type=Path)
+    r.add_argument("--obs", type=Path, required=True, help="observation folder (transforms.json)")
+    r.add_argument("--out", type=Path, default=Path("run"), help="run folder to write (default: run)")
+    r.add_argument("--steps", type=int, default=3000, help="sweeps of the sampler (default: 3000)")
+    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--thin", type=int, default=1, help="keep every n-th sweep (default: 1)")
+    r.add_argument("--burn", type=int, default=None,
+                   help="sweeps left out of the posterior summary (default: half)")
+    r.add_argument("--force", action="store_true", help="replace --out if it exists")
+    r.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    return p
+
+
+def _prepare_out(out: Path, force: bool) -> None:
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        if not force:
+            raise UsageError(f"{out} already exists; choose another --out or add --force to replace it")
+        if out.is_dir():
+            shutil.rmtree(out)
+        else:
+            out.unlink()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise UsageError(f"{out}: cannot create the output folder ({e.strerror})") from None
+
+
+def cmd_check(args) -> int:
+    from .lang import load_model
+
+    model = load_model(args.model)
+    print(f"{args.model}: {len(model.classes)} classes, sensors: {', '.join(model.sensors) or 'none'}")
+    for cls in model.classes:
+        print(f"class {cls.name}  (count ~ poisson({cls.rate:g}))")
+        for p in cls.parameters:
+            print(f"  {p.name:<10} {p.domain.describe():<24} ~ {p.prior}")
+    for kind, s in model.sensors.items():
+        noise = ", ".join(f"{p.name} ~ {p.prior}" for p in s.noise)
+        print(f"sensor {kind}: likelihood {s.likelihood}; {noise}")
+    if model.no_overlap:
+        print("constraint: no two footprints overlap")
+    return 0
+
+
+def cmd_simulate(args) -> int:
+    import numpy as np
+
+    from .lang import load_model
+    from .observations import load_cameras, write_observations
+    from .render import Renderer
+    from .simulate import load_scene, render_observations, sample_noise, sample_objects, scene_dict
+
+    model = load_model(args.model)
+    cameras = load_cameras(args.cameras)
+    rng = np.random.default_rng(np.random.SeedSequence(args.seed))
+    if args.scene:
+        objects, noise = load_scene(model, args.scene)
+        noise = noise or sample_noise(model, rng)
+    else:
+        objects = sample_objects(model, rng)
+        noise = sample_noise(model, rng)
+    _prepare_out(args.out, args.force)
+    frames = render_observations(model, objects, noise, cameras, Renderer(model.render), rng)
+    write_observations(args.out, frames, depth_format=args.depth_format)
+    scene = scene_dict(objects, noise)
+    (args.out / "scene.json").write_text(json.dumps(scene, indent=2) + "\n")
+    print(f"wrote {len(frames)} frames and the true scene ({len(objects)} objects) to {args.out}")
+    return 0
+
+
+def cmd_sample(args) -> int:
+    from .lang import load_model
+    from .observations import load_observations
+    from .run import run_chain
+    from .samples import format_summary
+
+    if args.steps < 1 or args.thin < 1:
+        raise UsageError("--steps and --thin must be at least 1")
+    model = load_model(args.model)
+    obs = load_observations(args.obs)
+    _prepare_out(args.out, args.force)
+    result = run_chain(
+        model, obs, args.out, steps=args.steps, seed=args.seed, thin=args.thin, burn=args.burn,
+        progress=False if args.quiet else None,
+    )
+    print(format_summary(result.summary))
+    print(f"samples: {args.out / 'samples.jsonl'}; summary: {args.out / 'summary.json'}")
+    return 130 if result.summary["interrupted"] else 0
+
+
+COMMANDS = {"check": cmd_check, "simulate": cmd_simulate, "sample": cmd_sample}
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.debug else logging.WARNING,
+                        format="sppl: %(levelname)s: %(message)s")
+    try:
+        return COMMANDS[args.command](args)
+    except SpplError as e:
+        if args.debug:
+            raise
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130

@@ -1,0 +1,171 @@
+"""The moves of the sampler, derived from the model's declared classes.
+
+Nothing here names a concrete class: every move is built from what ``ObjectClass`` declares
+(parameters, domains, priors, proposal scales, rate). Each proposal carries
+``log_q_ratio = log q(reverse) - log q(forward)``, so that the acceptance ratio is
+
+    log alpha = score(new) - score(old) + log_q_ratio
+
+with the scores of ``sppl.trace`` (densities with respect to the unit-rate marked Poisson
+process, so the scene is a set). The forward and reverse densities of the model jumps are
+written out as functions of their own (``log_q_birth`` and friends) so that a move and its
+reverse can be checked against each other; docs/inference.md derives them.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .model import Model, ObjectClass
+from .trace import SceneObject, Trace, make_object
+
+JUMPS = ("birth", "death", "change")
+
+
+@dataclass(frozen=True, eq=False)
+class Proposal:
+    move: str  # "parameters", "birth", "death", "change" or "noise"
+    label: str  # class name, or sensor kind for noise moves: acceptance is counted per label
+    objects: tuple[SceneObject, ...]
+    noise: Mapping[str, Mapping[str, float]]
+    changed: tuple[SceneObject, ...]  # objects that are new in this proposal
+    log_q_ratio: float = 0.0
+
+
+def jump_probabilities(model: Model) -> dict[str, float]:
+    """Probability of each model-jump type, given that a jump is made.
+
+    It does not depend on the state: a death or change chosen in an empty scene does nothing,
+    as in the thesis's Algorithm 7. A change needs a second class to change to.
+    """
+    w = dict(model.inference.jump_weights)
+    if len(model.classes) < 2:
+        w["change"] = 0.0
+    total = sum(w[j] for j in JUMPS)
+    return {j: w[j] / total for j in JUMPS}
+
+
+def _log(p: float) -> float:
+    return math.log(p) if p > 0 else -math.inf
+
+
+# -- proposal densities of the model jumps ---------------------------------------------------
+
+
+def log_q_birth(model: Model, cls: ObjectClass, values: Mapping[str, Any]) -> float:
+    """Density of proposing a birth of exactly this object: the jump type, the class
+    (uniform over classes), and its parameters drawn from the class's prior."""
+    return (
+        _log(jump_probabilities(model)["birth"])
+        - math.log(len(model.classes))
+        + cls.log_prior(values)
+    )
+
+
+def log_q_death(model: Model, n_objects: int) -> float:
+    """Probability of proposing the death of one given object among ``n_objects``."""
+    return _log(jump_probabilities(model)["death"]) - math.log(n_objects)
+
+
+def carried_parameters(old: ObjectClass, new: ObjectClass) -> tuple[str, ...]:
+    """Parameters a change of class keeps: same name and same domain in both classes."""
+    return tuple(
+        p.name for p in new.parameters if (q := old.parameter(p.name)) is not None and q.domain == p.domain
+    )
+
+
+def log_q_change(
+    model: Model, n_objects: int, old: ObjectClass, new: ObjectClass, new_values: Mapping[str, Any]
+) -> float:
+    """Density of changing a given object from ``old`` to ``new`` with these new values: the
+    object (uniform), the new class (uniform over the others), and the parameters that are not
+    carried over drawn from ``new``'s prior."""
+    carried = set(carried_parameters(old, new))
+    return (
+        _log(jump_probabilities(model)["change"])
+        - math.log(n_objects)
+        - math.log(len(model.classes) - 1)
+        + sum(p.log_prob(new_values[p.name]) for p in new.parameters if p.name not in carried)
+    )
+
+
+# -- proposals ---------------------------------------------------------------------------------
+
+
+def propose_birth(model: Model, trace: Trace, rng: np.random.Generator) -> Proposal:
+    cls = model.classes[int(rng.integers(len(model.classes)))]
+    values = cls.sample_prior(rng)
+    obj = make_object(model, cls, values)
+    objects = (*trace.objects, obj)
+    ratio = log_q_death(model, len(objects)) - log_q_birth(model, cls, values)
+    return Proposal("birth", cls.name, objects, trace.noise, (obj,), ratio)
+
+
+def propose_death(model: Model, trace: Trace, rng: np.random.Generator) -> Proposal | None:
+    n = len(trace.objects)
+    if n == 0:
+        return None
+    k = int(rng.integers(n))
+    gone = trace.objects[k]
+    objects = trace.objects[:k] + trace.objects[k + 1 :]
+    ratio = log_q_birth(model, gone.cls, gone.values) - log_q_death(model, n)
+    return Proposal("death", gone.cls.name, objects, trace.noise, (), ratio)
+
+
+def propose_change(model: Model, trace: Trace, rng: np.random.Generator) -> Proposal | None:
+    n = len(trace.objects)
+    if n == 0 or len(model.classes) < 2:
+        return None
+    k = int(rng.integers(n))
+    old = trace.objects[k]
+    others = [c for c in model.classes if c is not old.cls]
+    new_cls = others[int(rng.integers(len(others)))]
+    carried = set(carried_parameters(old.cls, new_cls))
+    values = {
+        p.name: old.values[p.name] if p.name in carried else p.prior.sample(rng)
+        for p in new_cls.parameters
+    }
+    obj = make_object(model, new_cls, values)
+    objects = trace.objects[:k] + (obj,) + trace.objects[k + 1 :]
+    ratio = log_q_change(model, n, new_cls, old.cls, old.values) - log_q_change(
+        model, n, old.cls, new_cls, values
+    )
+    return Proposal("change", old.cls.name, objects, trace.noise, (obj,), ratio)
+
+
+def propose_parameters(
+    model: Model, trace: Trace, k: int, names: tuple[str, ...], rng: np.random.Generator
+) -> Proposal:
+    """A symmetric random-walk step of some parameters of object ``k`` (Algorithm 3)."""
+    old = trace.objects[k]
+    values = dict(old.values)
+    for name in names:
+        p = old.cls.parameter(name)
+        values[name] = p.domain.step(values[name], p.proposal_scale, rng)
+    obj = make_object(model, old.cls, values)
+    objects = trace.objects[:k] + (obj,) + trace.objects[k + 1 :]
+    return Proposal("parameters", old.cls.name, objects, trace.noise, (obj,))
+
+
+def propose_noise(
+    model: Model, trace: Trace, kind: str, name: str, rng: np.random.Generator
+) -> Proposal:
+    """A symmetric random-walk step of one noise parameter (thesis section 4.2)."""
+    p = next(q for q in model.sensors[kind].noise if q.name == name)
+    noise = {k: dict(v) for k, v in trace.noise.items()}
+    noise[kind][name] = p.domain.step(noise[kind][name], p.proposal_scale, rng)
+    return Proposal("noise", kind, trace.objects, noise, ())
+
+
+def parameter_blocks(cls: ObjectClass) -> tuple[tuple[str, ...], ...]:
+    """How an object's parameters are moved: the continuous ones jointly (the thesis's
+    Algorithm 3 moves them together), each categorical one on its own, since a colour
+    redrawn together with a position is almost always rejected once the position fits."""
+    cont = tuple(p.name for p in cls.parameters if p.continuous)
+    cat = tuple((p.name,) for p in cls.parameters if not p.continuous)
+    return ((cont,) if cont else ()) + cat

@@ -1,0 +1,155 @@
+"""Samples on disk, and the summary of a run.
+
+Samples are streamed to ``samples.jsonl`` as they are drawn, one JSON object a line, flushed
+at least every second: a run stopped at any moment leaves a file whose complete lines are all
+valid samples (a torn last line is skipped on reading). ``summary.json`` holds what a user
+asks first: the MAP scene, the posterior over the number of objects and over classes, the
+acceptance rate per move type, and the noise scales.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections import Counter
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .trace import Trace
+
+
+class SampleWriter:
+    def __init__(self, path: Path, flush_seconds: float = 1.0) -> None:
+        self.path = path
+        self.file = open(path, "a", encoding="utf-8")  # noqa: SIM115 (closed in close())
+        self.flush_seconds = flush_seconds
+        self.last_flush = time.monotonic()
+
+    def write(self, step: int, trace: Trace) -> None:
+        record = {
+            "step": step,
+            "score": trace.score,
+            "log_likelihood": trace.log_likelihood,
+            **trace.as_dict(),
+        }
+        self.file.write(json.dumps(record) + "\n")
+        now = time.monotonic()
+        if now - self.last_flush >= self.flush_seconds:
+            self.flush()
+            self.last_flush = now
+
+    def flush(self) -> None:
+        self.file.flush()
+
+    def close(self) -> None:
+        self.file.flush()
+        self.file.close()
+
+
+def read_samples(path: str | Path) -> list[dict[str, Any]]:
+    """All complete samples of a ``samples.jsonl`` (a half-written last line is ignored)."""
+    out = []
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            try:
+                out.append(json.loads(line))
+            except json.JSONDecodeError:
+                break
+    return out
+
+
+def _class_key(objects: Iterable[dict]) -> str:
+    names = sorted(o["class"] for o in objects)
+    return " + ".join(names) if names else "(empty)"
+
+
+def summarise(
+    samples: list[dict[str, Any]],
+    class_names: Iterable[str],
+    map_sample: dict[str, Any] | None,
+    move_stats: dict[str, dict[str, int]],
+    *,
+    burn: int = 0,
+    extra: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """The run's summary from its samples after ``burn`` steps (the MAP is over all steps)."""
+    kept = [s for s in samples if s["step"] >= burn] or samples
+    n = len(kept)
+    count_post = Counter(len(s["objects"]) for s in kept)
+    per_class = {
+        c: dict(sorted(Counter(sum(o["class"] == c for o in s["objects"]) for s in kept).items()))
+        for c in class_names
+    }
+    configs = Counter(_class_key(s["objects"]) for s in kept)
+    noise: dict[str, dict[str, dict[str, float]]] = {}
+    for s in kept:
+        for kind, params in s["noise"].items():
+            for name, v in params.items():
+                noise.setdefault(kind, {}).setdefault(name, []).append(v)
+    noise_summary = {
+        kind: {name: {"mean": float(np.mean(v)), "sd": float(np.std(v))} for name, v in ps.items()}
+        for kind, ps in noise.items()
+    }
+    by_move: dict[str, list[int]] = {}
+    for key, c in move_stats.items():
+        move = key.split("/")[0]
+        acc = by_move.setdefault(move, [0, 0])
+        acc[0] += c["proposed"]
+        acc[1] += c["accepted"]
+    return {
+        **(extra or {}),
+        "samples_used": n,
+        "burn": burn,
+        "map": map_sample,
+        "n_objects": {str(k): v / n for k, v in sorted(count_post.items())} if n else {},
+        "class_counts": {c: {str(k): v / n for k, v in d.items()} for c, d in per_class.items()},
+        "class_sets": {k: v / n for k, v in configs.most_common(10)} if n else {},
+        "acceptance": {
+            m: {"proposed": a, "accepted": b, "rate": (b / a if a else math.nan)}
+            for m, (a, b) in sorted(by_move.items())
+        },
+        "acceptance_by_class": move_stats,
+        "noise": noise_summary,
+    }
+
+
+def format_summary(summary: dict[str, Any]) -> str:
+    """The summary as a few lines of text for the terminal."""
+    lines = []
+    if summary.get("interrupted"):
+        lines.append(f"interrupted after {summary.get('steps_done')} steps; samples so far:")
+    else:
+        lines.append(f"{summary.get('steps_done')} steps in {summary.get('seconds', 0):.1f} s")
+    lines.append(f"samples used: {summary['samples_used']} (after {summary['burn']} burn-in steps)")
+    m = summary.get("map")
+    if m:
+        lines.append(f"MAP scene (log joint {m['score']:.1f}, step {m['step']}):")
+        for o in m["objects"]:
+            params = ", ".join(
+                f"{k}={v:.3f}" if isinstance(v, float) else f"{k}={v}" for k, v in o["params"].items()
+            )
+            lines.append(f"  {o['class']}: {params}")
+        if not m["objects"]:
+            lines.append("  (no objects)")
+    lines.append(
+        "number of objects: "
+        + ", ".join(f"{k}: {v:.2f}" for k, v in summary["n_objects"].items())
+    )
+    for c, d in summary["class_counts"].items():
+        lines.append(f"  {c}: " + ", ".join(f"{k}: {v:.2f}" for k, v in d.items()))
+    lines.append("classes: " + "; ".join(f"{k}: {v:.2f}" for k, v in summary["class_sets"].items()))
+    lines.append(
+        "acceptance: "
+        + ", ".join(
+            f"{m}: {a['rate']:.3f} ({a['accepted']}/{a['proposed']})"
+            for m, a in summary["acceptance"].items()
+        )
+    )
+    for kind, ps in summary["noise"].items():
+        for name, s in ps.items():
+            lines.append(f"noise {kind}.{name}: {s['mean']:.4f} ± {s['sd']:.4f}")
+    return "\n".join(lines)

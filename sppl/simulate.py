@@ -1,0 +1,113 @@
+"""Forward simulation: a scene from the prior (or a given one), rendered and made noisy.
+
+This is the model's generative story run forwards (thesis chapter 3), and what ``sppl simulate``
+and the statistical tests use to make observations whose truth is known.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .camera import Camera
+from .errors import SpplError
+from .model import Model
+from .observations import Frame
+from .trace import SceneObject, make_object, scene_is_valid
+
+
+def sample_objects(model: Model, rng: np.random.Generator, max_tries: int = 10_000):
+    """Objects drawn from the prior: Poisson counts per class, parameters from each class's
+    prior, and, under the no-overlap constraint, whole scenes redrawn until none overlap
+    (rejection sampling, which is exactly the constrained prior)."""
+    for _ in range(max_tries):
+        objects = [
+            make_object(model, cls, cls.sample_prior(rng))
+            for cls in model.classes
+            for _ in range(int(rng.poisson(cls.rate)))
+        ]
+        if scene_is_valid(objects):
+            return tuple(objects)
+    raise SpplError(
+        f"no scene without overlapping objects in {max_tries} draws from the prior; "
+        "lower the classes' rates or widen the position priors"
+    )
+
+
+def sample_noise(model: Model, rng: np.random.Generator) -> dict[str, dict[str, float]]:
+    return {k: {p.name: p.prior.sample(rng) for p in s.noise} for k, s in model.sensors.items()}
+
+
+def objects_from_dict(model: Model, scene: Mapping[str, Any], where: str = "scene") -> tuple[SceneObject, ...]:
+    """Objects of a scene file: ``{"objects": [{"class": ..., "params": {...}}, ...]}``."""
+    objects = []
+    for i, o in enumerate(scene.get("objects", [])):
+        try:
+            cls = model.object_class(o["class"])
+        except KeyError:
+            raise SpplError(
+                f"{where}: object {i} has unknown class {o.get('class')!r}; "
+                f"the model's classes are {', '.join(model.class_names)}"
+            ) from None
+        params = dict(o.get("params", {}))
+        missing = [n for n in cls.parameter_names if n not in params]
+        if missing:
+            raise SpplError(f"{where}: object {i} ({cls.name}) lacks parameters {', '.join(missing)}")
+        obj = make_object(model, cls, {n: params[n] for n in cls.parameter_names})
+        if not np.isfinite(obj.log_prior):
+            raise SpplError(f"{where}: object {i} ({cls.name}) has a value outside its domain")
+        objects.append(obj)
+    return tuple(objects)
+
+
+def load_scene(model: Model, path: str | Path):
+    """A scene file's objects and noise scales (the noise may be absent: then None)."""
+    try:
+        scene = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise SpplError(f"{path}: no such scene file") from None
+    except json.JSONDecodeError as e:
+        raise SpplError(f"{path}:{e.lineno}:{e.colno}: not valid JSON: {e.msg}") from None
+    return objects_from_dict(model, scene, str(path)), scene.get("noise")
+
+
+def render_observations(
+    model: Model,
+    objects: Sequence[SceneObject],
+    noise: Mapping[str, Mapping[str, float]],
+    cameras: Sequence[tuple[Camera, Sequence[str]]],
+    renderer,
+    rng: np.random.Generator,
+) -> list[Frame]:
+    """Render each camera and add each modality's noise from the model's likelihoods."""
+    from .likelihoods import get_likelihood
+
+    parts = [p for o in objects for p in o.parts]
+    frames = []
+    for cam, modalities in cameras:
+        rgb, depth = renderer.render(parts, cam)
+        frame_rgb = frame_depth = valid = None
+        if "rgb" in modalities:
+            s = model.sensors.get("image")
+            frame_rgb = rgb if s is None else get_likelihood(s.likelihood, s.options).sample(
+                rgb, noise["image"], rng)
+            frame_rgb = np.clip(frame_rgb, 0.0, 1.0).astype(np.float32)
+        if "depth" in modalities:
+            s = model.sensors.get("depth")
+            frame_depth = depth if s is None else get_likelihood(s.likelihood, s.options).sample(
+                depth, noise["depth"], rng)
+            frame_depth = np.clip(frame_depth, 0.0, cam.depth_max).astype(np.float32)
+            valid = np.ones(frame_depth.shape, dtype=bool)
+        frames.append(Frame(camera=cam, rgb=frame_rgb, depth=frame_depth, depth_valid=valid))
+    return frames
+
+
+def scene_dict(objects, noise) -> dict[str, Any]:
+    return {
+        "objects": [o.as_dict() for o in objects],
+        "noise": {k: {n: float(v) for n, v in p.items()} for k, p in noise.items()},
+    }

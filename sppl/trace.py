@@ -1,0 +1,145 @@
+"""Traces: one hypothesis about the scene, with every random choice and its log-probability.
+
+The latent scene is a *set* of objects. Its prior density, with respect to the unit-rate
+marked Poisson process over (class, parameters), is
+
+    exp(-sum_c lambda_c) * prod_objects lambda_c * p_c(phi)       (times the no-overlap indicator)
+
+so a trace's score is
+
+    score = log p(choices, observations)
+          = -sum_c lambda_c + sum_objects [log lambda_c + log p_c(phi)]
+            + sum_sensors log p(noise) + log p(observations | scene, noise).
+
+The sign is + log-probability throughout. ``objects`` is a tuple only for storage: its order
+carries no meaning, and no acceptance ratio counts orderings (see docs/inference.md).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import shapely
+
+from .geometry import Part, footprints_overlap
+from .model import Model, ObjectClass
+
+Address = tuple
+
+
+@dataclass(frozen=True)
+class Choice:
+    value: Any
+    log_prob: float
+
+
+@dataclass(frozen=True, eq=False)
+class SceneObject:
+    """One object: its class and parameter values, and what follows from them."""
+
+    cls: ObjectClass
+    values: Mapping[str, Any]
+    log_prior: float  # log lambda_c + log p_c(phi)
+    parts: tuple[Part, ...] = field(repr=False)
+    footprint: shapely.Polygon | None = field(repr=False, default=None)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"class": self.cls.name, "params": {k: _plain(v) for k, v in self.values.items()}}
+
+
+def _plain(v: Any) -> Any:
+    return float(v) if isinstance(v, (float, np.floating)) else v
+
+
+def make_object(model: Model, cls: ObjectClass, values: Mapping[str, Any]) -> SceneObject:
+    values = dict(values)
+    log_prior = math.log(cls.rate) + cls.log_prior(values) if cls.rate > 0 else -math.inf
+    if not math.isfinite(log_prior):
+        return SceneObject(cls, values, -math.inf, ())
+    parts = cls.parts(values)
+    footprint = shapely.Polygon(cls.footprint(values)) if model.no_overlap else None
+    return SceneObject(cls, values, log_prior, parts, footprint)
+
+
+def overlaps_any(obj: SceneObject, others) -> bool:
+    if obj.footprint is None:
+        return False
+    return any(o is not obj and footprints_overlap(obj.footprint, o.footprint) for o in others)
+
+
+def scene_is_valid(objects) -> bool:
+    """No two footprints overlap (vacuously true when the model has no such constraint)."""
+    objs = list(objects)
+    return not any(overlaps_any(o, objs[i + 1 :]) for i, o in enumerate(objs))
+
+
+@dataclass(frozen=True, eq=False)
+class Trace:
+    """A full hypothesis: objects, noise parameters, and the likelihood's cached statistics.
+
+    ``stats`` maps (frame index, sensor kind) to that likelihood's sufficient statistics for
+    the current objects, so that a noise move re-scores without rendering.
+    """
+
+    model: Model = field(repr=False)
+    objects: tuple[SceneObject, ...]
+    noise: Mapping[str, Mapping[str, float]]
+    stats: Mapping[tuple[int, str], np.ndarray]
+    log_prior: float
+    log_likelihood: float
+
+    @property
+    def score(self) -> float:
+        return self.log_prior + self.log_likelihood
+
+    @property
+    def n_objects(self) -> int:
+        return len(self.objects)
+
+    def counts(self, class_names) -> dict[str, int]:
+        c = dict.fromkeys(class_names, 0)
+        for o in self.objects:
+            c[o.cls.name] += 1
+        return c
+
+    def choices(self) -> dict[Address, Choice]:
+        """Every random choice at its address, with its log-probability.
+
+        Object addresses use the object's position in ``objects``; they name a choice within
+        this trace only, since the scene itself is unordered.
+        """
+        out: dict[Address, Choice] = {}
+        for i, o in enumerate(self.objects):
+            out[("object", i, "class")] = Choice(o.cls.name, math.log(o.cls.rate))
+            for p in o.cls.parameters:
+                out[("object", i, p.name)] = Choice(o.values[p.name], p.log_prob(o.values[p.name]))
+        for kind, sensor in self.model.sensors.items():
+            for p in sensor.noise:
+                value = self.noise[kind][p.name]
+                out[("noise", kind, p.name)] = Choice(value, p.log_prob(value))
+        return out
+
+    def with_(self, **changes) -> Trace:
+        return replace(self, **changes)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "objects": [o.as_dict() for o in self.objects],
+            "noise": {k: {n: float(v) for n, v in p.items()} for k, p in self.noise.items()},
+        }
+
+
+def objects_log_prior(model: Model, objects) -> float:
+    return -sum(c.rate for c in model.classes) + sum(o.log_prior for o in objects)
+
+
+def noise_log_prior(model: Model, noise: Mapping[str, Mapping[str, float]]) -> float:
+    total = 0.0
+    for kind, sensor in model.sensors.items():
+        for p in sensor.noise:
+            total += p.log_prob(noise[kind][p.name])
+    return total

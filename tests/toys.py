@@ -1,0 +1,70 @@
+"""Small models built in Python, for tests of the engine that need no model file."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sppl.chain import Sampler
+from sppl.distributions import Categorical, Gamma, Normal, Uniform
+from sppl.domains import Finite, Periodic, Positive, Real
+from sppl.geometry import Part, rotation_z, scaling, translation
+from sppl.model import InferenceSettings, Model, ObjectClass, Parameter, Sensor
+from sppl.scoring import PriorScorer
+
+COLOURS = ("red", "blue")
+
+
+def _sphere(v):
+    r = v["r"]
+    return (Part("sphere", translation(v["x"], v["y"], 0) @ scaling(r, r, r), (1.0, 0.0, 0.0)),)
+
+
+def _box(v):
+    s = v["s"]
+    m = translation(v["x"], v["y"], 0) @ rotation_z(v["a"]) @ scaling(s, s, s)
+    return (Part("box", m, (0.0, 0.0, 1.0)),)
+
+
+def ball_class(name="ball", rate=2.0) -> ObjectClass:
+    return ObjectClass(
+        name,
+        rate,
+        (
+            Parameter("x", Real(), Normal(0.0, 2.0), 0.8),
+            Parameter("y", Real(), Normal(0.0, 2.0), 0.8),
+            Parameter("r", Positive(), Gamma(2.0, 0.2), 0.1),
+            Parameter("c", Finite(COLOURS), Categorical(COLOURS, (0.3, 0.7))),
+        ),
+        _sphere,
+    )
+
+
+def block_class(name="block", rate=1.0) -> ObjectClass:
+    q = np.pi / 4
+    return ObjectClass(
+        name,
+        rate,
+        (
+            Parameter("x", Real(), Normal(0.0, 2.0), 0.8),
+            Parameter("y", Real(), Normal(0.0, 2.0), 0.8),
+            Parameter("a", Periodic(-q, q), Uniform(-q, q), 0.4),
+            Parameter("s", Positive(), Gamma(2.0, 0.25), 0.1),
+            Parameter("c", Finite(COLOURS), Categorical(COLOURS, (0.5, 0.5))),
+        ),
+        _box,
+    )
+
+
+def toy_model(classes, *, no_overlap=False, p_jump=1.0, noise=False) -> Model:
+    sensors = {}
+    if noise:
+        sensors["image"] = Sensor(
+            "image", "gaussian", (Parameter("sigma", Positive(), Gamma(2.0, 0.05), 0.02),)
+        )
+    return Model(
+        tuple(classes), sensors, InferenceSettings(p_jump=p_jump), no_overlap=no_overlap
+    )
+
+
+def prior_sampler(model: Model, seed: int) -> Sampler:
+    return Sampler(model, PriorScorer(), np.random.default_rng(seed))
