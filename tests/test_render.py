@@ -1,0 +1,324 @@
+"""The OpenGL renderer against geometry computed by hand and against the numpy ray caster.
+
+Hand-computed checks run on both renderers, so the oracle is itself checked before the GL path
+is compared with it on random scenes.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from sppl.camera import Camera, look_at
+from sppl.errors import RenderError
+from sppl.geometry import PRIMITIVES, Part, rotation, scaling, translation
+from sppl.model import RenderSettings
+from sppl.render import Renderer, gl_context, raycast
+from sppl.render import context as context_module
+
+SETTINGS = RenderSettings(background=(0.1, 0.2, 0.3), ambient=0.35, light=(0.4, -0.3, 1.0))
+RED = (0.9, 0.1, 0.1)
+
+
+@pytest.fixture(scope="module")
+def gl_renderer():
+    try:
+        gl_context()
+    except RenderError as error:
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"CI must be able to render: {error}")
+        pytest.skip(f"no headless OpenGL context on this machine: {error}")
+    renderer = Renderer(SETTINGS)
+    yield renderer
+    renderer.release()
+
+
+@pytest.fixture(params=["gl", "raycast"])
+def renderer_for(request):
+    """A function settings -> render function (parts, camera) -> (rgb, depth), per renderer."""
+    if request.param == "raycast":
+        yield lambda settings=SETTINGS: lambda parts, camera: raycast(parts, camera, settings)
+        return
+    request.getfixturevalue("gl_renderer")  # skips (or fails on CI) without a GL context
+    made = []
+
+    def make(settings=SETTINGS):
+        made.append(Renderer(settings))
+        return made[-1].render
+
+    yield make
+    for renderer in made:
+        renderer.release()
+
+
+@pytest.fixture
+def render(renderer_for):
+    return renderer_for(SETTINGS)
+
+
+def top_down(width=64, height=64, fx=100.0, fy=100.0, cx=None, cy=None, **kwargs) -> Camera:
+    """A camera 5 m above the origin looking straight down, image up = world +y."""
+    return Camera(
+        "top",
+        width,
+        height,
+        fx,
+        fy,
+        width / 2 if cx is None else cx,
+        height / 2 if cy is None else cy,
+        look_at((0.0, 0.0, 5.0), (0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0)),
+        **kwargs,
+    )
+
+
+def unit_box(colour=RED) -> Part:
+    return Part("box", np.eye(4), colour)
+
+
+def pixel_bounds(depth: np.ndarray, depth_max: float) -> tuple[int, int, int, int]:
+    """(first row, last row, first column, last column) of the pixels that hit something."""
+    rows, cols = np.nonzero(depth < depth_max)
+    return rows.min(), rows.max(), cols.min(), cols.max()
+
+
+def covered(v0, v1, u0, u1) -> tuple[float, float, float, float]:
+    """Roughly the pixel_bounds of a region spanning [u0, u1] x [v0, v1] continuously: the
+    pixels whose centres (index + 0.5) lie inside, give or take one at each edge."""
+    return v0 - 0.5, v1 - 0.5, u0 - 0.5, u1 - 0.5
+
+
+# --- geometry computed by hand ---------------------------------------------------------------
+
+
+def test_box_top_face_size_depth_and_shade(render):
+    camera = top_down()
+    rgb, depth = render([unit_box()], camera)
+    assert rgb.shape == (64, 64, 3) and depth.shape == (64, 64)
+    assert rgb.dtype == np.float32 and depth.dtype == np.float32
+    # The top face (z = 1) is 4 m away: 1 m spans 100 * 1 / 4 = 25 px, centred on pixel 32,
+    # so from 19.5 to 44.5 in continuous coordinates. The sides are hidden beneath it.
+    bounds = pixel_bounds(depth, camera.depth_max)
+    assert np.allclose(bounds, covered(19.5, 44.5, 19.5, 44.5), atol=1)
+    assert depth[32, 32] == pytest.approx(4.0, abs=1e-4)
+    light = np.asarray(SETTINGS.light) / np.linalg.norm(SETTINGS.light)
+    shade = SETTINGS.ambient + (1 - SETTINGS.ambient) * light[2]
+    assert np.allclose(rgb[32, 32], np.asarray(RED) * shade, atol=1e-5)
+
+
+def test_background_pixels(render):
+    camera = top_down(depth_max=7.5)
+    rgb, depth = render([unit_box()], camera)
+    for corner in [(0, 0), (0, -1), (-1, 0), (-1, -1)]:
+        assert depth[corner] == camera.depth_max
+        assert np.allclose(rgb[corner], SETTINGS.background)
+
+
+def test_nothing_to_draw_gives_only_background(render):
+    camera = top_down(width=20, height=10)
+    rgb, depth = render([], camera)
+    assert np.all(depth == camera.depth_max)
+    assert np.allclose(rgb, SETTINGS.background)
+
+
+def test_depth_is_clipped_at_depth_max(render):
+    camera = top_down(depth_max=3.0)
+    rgb, depth = render([unit_box()], camera)
+    assert depth[32, 32] == pytest.approx(3.0)
+    assert not np.allclose(rgb[32, 32], SETTINGS.background)  # still drawn, only clipped
+
+
+def test_ray_depth_is_z_depth_over_cosine(render):
+    camera = top_down(depth_type="ray")
+    _, depth = render([unit_box()], camera)
+    for i, j in [(32, 32), (22, 40), (41, 21), (20, 20)]:
+        x = (j + 0.5 - camera.cx) / camera.fx
+        y = (i + 0.5 - camera.cy) / camera.fy
+        cosine = 1.0 / math.sqrt(1.0 + x * x + y * y)
+        assert depth[i, j] == pytest.approx(4.0 / cosine, abs=1e-4)
+
+
+def test_sphere_resting_on_the_ground_has_its_top_at_twice_its_radius(render):
+    radius = 0.7
+    # The principal point at a pixel centre sends that pixel's ray through the mesh's top
+    # vertex, which lies on the sphere; elsewhere the facets are up to a few mm inside it.
+    camera = top_down(cx=32.5, cy=32.5)
+    _, depth = render([Part("sphere", scaling(radius, radius, radius), RED)], camera)
+    assert 5.0 - depth[32, 32] == pytest.approx(2 * radius, abs=1e-3)
+
+
+def test_off_centre_principal_point_shifts_the_image(render):
+    # A small box whose top face is a square facing the camera, so its pixels are centred on
+    # the projection of the face's centre.
+    part = Part("box", translation(0.3, -0.2, 0.0) @ scaling(0.4, 0.4, 1.0), RED)
+    top_centre = np.array([[0.3, -0.2, 1.0]])
+    for cx, cy in [(32.0, 32.0), (20.0, 40.0), (45.5, 25.0)]:
+        camera = top_down(cx=cx, cy=cy)
+        _, depth = render([part], camera)
+        rows, cols = np.nonzero(depth < camera.depth_max)
+        uv, _ = camera.project(top_centre)
+        assert cols.mean() + 0.5 == pytest.approx(uv[0, 0], abs=0.5)
+        assert rows.mean() + 0.5 == pytest.approx(uv[0, 1], abs=0.5)
+
+
+def test_non_square_image_with_unequal_focal_lengths(render):
+    camera = top_down(width=80, height=48, fx=120.0, fy=80.0, cx=44.0, cy=22.0)
+    rgb, depth = render([unit_box()], camera)
+    assert rgb.shape == (48, 80, 3) and depth.shape == (48, 80)
+    corners = np.array([[x, y, 1.0] for x in (-0.5, 0.5) for y in (-0.5, 0.5)])
+    uv, _ = camera.project(corners)
+    u0, u1, v0, v1 = uv[:, 0].min(), uv[:, 0].max(), uv[:, 1].min(), uv[:, 1].max()
+    assert (u1 - u0, v1 - v0) == pytest.approx((30.0, 20.0))  # 1 m at 4 m, fx = 120, fy = 80
+    assert np.allclose(pixel_bounds(depth, camera.depth_max), covered(v0, v1, u0, u1), atol=1)
+
+
+# --- shading ---------------------------------------------------------------------------------
+
+
+def test_faces_towards_the_light_are_brighter_and_faces_away_get_only_ambient(renderer_for):
+    white = (1.0, 1.0, 1.0)
+    eye = (4.0, -3.0, 2.5)
+    camera = Camera("oblique", 64, 64, 60.0, 60.0, 32.0, 32.0, look_at(eye, (0.0, 0.0, 0.5)))
+    face_centres = {"+x": (0.5, 0.0, 0.5), "-y": (0.0, -0.5, 0.5), "top": (0.0, 0.0, 1.0)}
+    uv, _ = camera.project(np.array(list(face_centres.values())))
+    pixels = {name: (int(v), int(u)) for name, (u, v) in zip(face_centres, uv)}
+
+    settings = RenderSettings(background=(0, 0, 0), ambient=0.3, light=(1.0, 0.0, 0.0))
+    rgb, _ = renderer_for(settings)([Part("box", np.eye(4), white)], camera)
+    lit, side, top = (rgb[pixels[name]] for name in ("+x", "-y", "top"))
+    assert np.allclose(lit, 1.0, atol=1e-5)  # facing the light
+    assert np.allclose(side, 0.3, atol=1e-5) and np.allclose(top, 0.3, atol=1e-5)  # edge-on
+
+    settings = RenderSettings(background=(0, 0, 0), ambient=0.3, light=(-1.0, 0.0, 0.0))
+    rgb, _ = renderer_for(settings)([Part("box", np.eye(4), white)], camera)
+    assert np.allclose(rgb[pixels["+x"]], 0.3, atol=1e-5)  # turned away: ambient only
+
+
+def test_normals_follow_non_uniform_scale(renderer_for):
+    # A box rotated and then stretched: its top face's normal is the inverse-transpose of the
+    # linear map applied to +z (here nearly vertical), not the map itself (here 74 degrees off).
+    linear = scaling(3.0, 1.0, 0.5) @ rotation((0.0, 1.0, 0.0), math.radians(30))
+    part = Part("box", linear, (1.0, 1.0, 1.0))
+    normal = np.linalg.inv(linear[:3, :3]).T @ (0.0, 0.0, 1.0)
+    top_centre = linear[:3, :3] @ (0.0, 0.0, 1.0)
+    above = np.eye(4)
+    above[:3, 3] = top_centre + (0.0, 0.0, 5.0)
+    camera = Camera("above", 64, 64, 100.0, 100.0, 32.5, 32.5, above)  # looks down -z
+    settings = RenderSettings(background=(0, 0, 0), ambient=0.0, light=(0.0, 0.0, 1.0))
+    rgb, _ = renderer_for(settings)([part], camera)
+    assert rgb[32, 32, 0] == pytest.approx(normal[2] / np.linalg.norm(normal), abs=1e-4)
+
+
+# --- the GL renderer against the ray caster --------------------------------------------------
+
+
+def random_scene(rng: np.random.Generator) -> list[Part]:
+    parts = []
+    for _ in range(rng.integers(2, 5)):
+        axis = rng.normal(size=3)
+        matrix = (
+            translation(*rng.uniform(-1.5, 1.5, 2), rng.uniform(-0.3, 0.5))
+            @ rotation(axis / np.linalg.norm(axis), rng.uniform(0, 2 * np.pi))
+            @ scaling(*rng.uniform(0.3, 1.2, 3))
+        )
+        colour = tuple(rng.uniform(0.2, 1.0, 3))
+        parts.append(Part(PRIMITIVES[rng.integers(len(PRIMITIVES))], matrix, colour))
+    return parts
+
+
+def random_camera(rng: np.random.Generator, width: int, height: int, depth_type: str) -> Camera:
+    eye = rng.normal(size=3)
+    eye[2] = abs(eye[2]) + 0.5
+    eye *= 5.0 / np.linalg.norm(eye)
+    return Camera(
+        "random",
+        width,
+        height,
+        rng.uniform(30, 50),
+        rng.uniform(30, 50),
+        width / 2 + rng.uniform(-3, 3),
+        height / 2 + rng.uniform(-3, 3),
+        look_at(eye, (0.0, 0.0, 0.3)),
+        depth_max=8.0,
+        depth_type=depth_type,
+    )
+
+
+@pytest.mark.parametrize(
+    "seed, size, depth_type",
+    [(0, (32, 32), "z"), (1, (48, 40), "ray"), (2, (48, 40), "z"), (3, (32, 32), "ray"),
+     (4, (48, 40), "z"), (5, (32, 32), "z")],
+)
+def test_gl_matches_the_ray_caster_on_random_scenes(gl_renderer, seed, size, depth_type):
+    rng = np.random.default_rng(seed)
+    parts = random_scene(rng)
+    camera = random_camera(rng, *size, depth_type)
+    rgb, depth = gl_renderer.render(parts, camera)
+    rgb_ref, depth_ref = raycast(parts, camera, SETTINGS)
+
+    hit, hit_ref = depth < camera.depth_max, depth_ref < camera.depth_max
+    assert hit_ref.any(), "the scene should be in view"
+    # Pixel centres within the rasteriser's sub-pixel precision of an edge may go either way.
+    assert np.mean(hit != hit_ref) <= 0.02
+    assert np.allclose(rgb[~hit], SETTINGS.background)
+
+    # Depth must agree exactly except where one object occludes another, whose edges the
+    # rasteriser may place a sub-pixel step differently (the background does not count).
+    both = hit & hit_ref
+    highest = ndimage.maximum_filter(np.where(hit_ref, depth_ref, -np.inf), 3)
+    lowest = ndimage.minimum_filter(np.where(hit_ref, depth_ref, np.inf), 3)
+    smooth = both & (highest - lowest < 0.5)
+    assert smooth.sum() > 0.5 * both.sum()
+    assert np.abs(depth - depth_ref)[smooth].max() <= 1e-3
+
+    # Colours change at every facet edge too (a sphere has 1280 facets), so a pixel centre on
+    # one may take either facet's colour; all the others must agree.
+    colour_error = np.abs(rgb - rgb_ref).max(axis=-1)[both]
+    assert np.mean(colour_error > 0.02) <= 0.01
+
+
+# --- the renderer's bookkeeping --------------------------------------------------------------
+
+
+def test_render_many_renders_each_camera_at_its_own_size(gl_renderer):
+    cameras = [top_down(), top_down(width=80, height=48, fx=120.0, fy=80.0, depth_type="ray")]
+    images = gl_renderer.render_many([unit_box()], cameras)
+    assert [rgb.shape for rgb, _ in images] == [(64, 64, 3), (48, 80, 3)]
+    assert [depth.shape for _, depth in images] == [(64, 64), (48, 80)]
+    again = gl_renderer.render([unit_box()], cameras[0])
+    assert np.array_equal(again[0], images[0][0]) and np.array_equal(again[1], images[0][1])
+
+
+def test_framebuffers_are_reused_per_size(gl_renderer):
+    camera = top_down(width=24, height=16)
+    gl_renderer.render([unit_box()], camera)
+    target = gl_renderer._targets[(24, 16)]
+    gl_renderer.render([unit_box()], camera)
+    assert gl_renderer._targets[(24, 16)] is target
+
+
+def test_unknown_primitive_is_a_render_error(gl_renderer):
+    with pytest.raises(RenderError, match="unknown primitive 'torus'"):
+        gl_renderer.render([Part("torus", np.eye(4), RED)], top_down())
+
+
+def test_released_renderer_refuses_to_render(gl_renderer):
+    renderer = Renderer(SETTINGS)
+    renderer.release()
+    with pytest.raises(RenderError, match="released"):
+        renderer.render([unit_box()], top_down())
+
+
+def test_context_failure_names_the_packages_to_install(monkeypatch):
+    def fail(**kwargs):
+        raise Exception("requested device index 0, but found 0 devices")
+
+    monkeypatch.setattr(context_module.moderngl, "create_context", fail)
+    with pytest.raises(RenderError) as caught:
+        context_module._create()
+    message = str(caught.value)
+    assert "found 0 devices" in message
+    assert "libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri" in message
