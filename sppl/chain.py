@@ -122,3 +122,23 @@ class Sampler:
         if u < self.jump["birth"] + self.jump["death"]:
             return moves.propose_death(self.model, trace, self.rng)
         return moves.propose_change(self.model, trace, self.rng)
+
+    def prune(self, trace: Trace) -> Trace:
+        """Greedy deaths that raise the score, until none does.
+
+        Used on the best sample to report a MAP scene: the chain samples, it does not
+        optimise, so its best sample still carries objects whose removal would raise the
+        posterior density, typically objects that no camera sees, which only the prior
+        scores. This is an estimate of the mode, not part of the chain.
+        """
+        improved = True
+        while improved and trace.objects:
+            improved = False
+            for k in range(len(trace.objects)):
+                objects = trace.objects[:k] + trace.objects[k + 1 :]
+                p = moves.Proposal("prune", "", objects, trace.noise, ())
+                new = self.evaluate(trace, p)
+                if new is not None and new.score > trace.score:
+                    trace, improved = new, True
+                    break
+        return trace

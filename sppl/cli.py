@@ -16,6 +16,8 @@ from pathlib import Path
 from . import __version__
 from .errors import SpplError, UsageError
 
+DEFAULT_STEPS = 20000
+
 EPILOG = """\
 exit status: 0 success, 1 bad input (model, observations, options), 2 usage, 130 interrupted.
 Documentation: docs/ in the source tree (tutorial, language, inference, observations)."""
@@ -54,7 +56,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("model", type=Path)
     r.add_argument("--obs", type=Path, required=True, help="observation folder (transforms.json)")
     r.add_argument("--out", type=Path, default=Path("run"), help="run folder to write (default: run)")
-    r.add_argument("--steps", type=int, default=3000, help="sweeps of the sampler (default: 3000)")
+    r.add_argument("--steps", type=int, default=DEFAULT_STEPS,
+                   help=f"sweeps of the sampler (default: {DEFAULT_STEPS})")
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--thin", type=int, default=1, help="keep every n-th sweep (default: 1)")
     r.add_argument("--burn", type=int, default=None,

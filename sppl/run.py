@@ -43,10 +43,12 @@ def run_chain(
     burn: int | None = None,
     progress: bool | None = None,
     extra: dict[str, Any] | None = None,
+    callback=None,
 ) -> RunResult:
     """Run one chain for ``steps`` sweeps from an empty scene, streaming samples to
     ``out/samples.jsonl`` and writing ``out/summary.json``. Ctrl-C or SIGTERM stop it early
-    with everything drawn so far on disk and summarised."""
+    with everything drawn so far on disk and summarised. ``callback(step, trace, best,
+    sampler)``, if given, is called after every sweep; returning True stops the run."""
     from .render import Renderer, renderer_string
 
     out.mkdir(parents=True, exist_ok=True)
@@ -87,6 +89,8 @@ def run_chain(
             if step % thin == 0:
                 writer.write(step, trace)
             bar.update(1)
+            if callback is not None and callback(step, trace, best, sampler):
+                break
             if step % 50 == 0:
                 bar.set_postfix(objects=trace.n_objects, log_joint=f"{trace.score:.0f}", refresh=False)
     except (KeyboardInterrupt, Stop):
@@ -96,6 +100,7 @@ def run_chain(
         writer.close()
         signal.signal(signal.SIGTERM, previous)
     seconds = time.monotonic() - t0
+    best = sampler.prune(best)
     map_sample = {"step": best_step, "score": best.score, "log_likelihood": best.log_likelihood,
                   **best.as_dict()}
     summary = summarise(

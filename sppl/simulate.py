@@ -13,10 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from .camera import Camera
 from .errors import SpplError
 from .model import Model
-from .observations import Frame
+from .observations import CameraSpec, Frame
 from .trace import SceneObject, make_object, scene_is_valid
 
 
@@ -79,7 +78,7 @@ def render_observations(
     model: Model,
     objects: Sequence[SceneObject],
     noise: Mapping[str, Mapping[str, float]],
-    cameras: Sequence[tuple[Camera, Sequence[str]]],
+    cameras: Sequence[CameraSpec],
     renderer,
     rng: np.random.Generator,
 ) -> list[Frame]:
@@ -88,7 +87,8 @@ def render_observations(
 
     parts = [p for o in objects for p in o.parts]
     frames = []
-    for cam, modalities in cameras:
+    for spec in cameras:
+        cam, modalities = spec.camera, spec.modalities
         rgb, depth = renderer.render(parts, cam)
         frame_rgb = frame_depth = valid = None
         if "rgb" in modalities:
