@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import moves
+from .birth import BirthProposal
 from .model import Model
 from .trace import Trace, noise_log_prior, objects_log_prior, overlaps_any
 
@@ -49,6 +50,7 @@ class Sampler:
         self.rng = rng
         self.stats = MoveStats()
         self.jump = moves.jump_probabilities(model)
+        self.birth = BirthProposal(model, scorer if getattr(scorer, "terms", None) else None)
 
     # -- states --------------------------------------------------------------------------------
 
@@ -61,13 +63,12 @@ class Sampler:
         }
         return self.make_trace(tuple(objects), noise)
 
-    def make_trace(self, objects, noise, stats=None) -> Trace:
-        if stats is None:
-            stats = self.scorer.statistics(objects)
+    def make_trace(self, objects, noise) -> Trace:
+        stats, renders = self.scorer.evaluate(objects)
         log_prior = objects_log_prior(self.model, objects) + noise_log_prior(self.model, noise)
         return Trace(
             self.model, tuple(objects), noise, stats, log_prior,
-            self.scorer.log_likelihood(stats, noise),
+            self.scorer.log_likelihood(stats, noise), renders,
         )
 
     def evaluate(self, trace: Trace, proposal: moves.Proposal) -> Trace | None:
@@ -83,11 +84,13 @@ class Sampler:
         if not math.isfinite(log_prior):
             return None
         if proposal.move == "noise":
-            stats = trace.stats
+            stats, renders = trace.stats, trace.renders
         else:
-            stats = self.scorer.statistics(proposal.objects)
+            stats, renders = self.scorer.evaluate(proposal.objects)
         log_lik = self.scorer.log_likelihood(stats, proposal.noise)
-        return Trace(self.model, proposal.objects, proposal.noise, stats, log_prior, log_lik)
+        return Trace(
+            self.model, proposal.objects, proposal.noise, stats, log_prior, log_lik, renders
+        )
 
     def step(self, trace: Trace, proposal: moves.Proposal | None) -> Trace:
         """Metropolis-Hastings accept/reject, in log space; NaN is never accepted."""
@@ -97,6 +100,8 @@ class Sampler:
         accepted = False
         if new is not None:
             log_alpha = new.score - trace.score + proposal.log_q_ratio
+            if proposal.ratio_fn is not None:
+                log_alpha += proposal.ratio_fn(new)
             accepted = bool(log_alpha >= 0.0 or math.log(self.rng.random()) < log_alpha)
         self.stats.record(proposal.move, proposal.label, accepted)
         return new if accepted else trace
@@ -118,9 +123,9 @@ class Sampler:
     def propose_jump(self, trace: Trace) -> moves.Proposal | None:
         u = self.rng.random()
         if u < self.jump["birth"]:
-            return moves.propose_birth(self.model, trace, self.rng)
+            return moves.propose_birth(self.model, trace, self.rng, self.birth)
         if u < self.jump["birth"] + self.jump["death"]:
-            return moves.propose_death(self.model, trace, self.rng)
+            return moves.propose_death(self.model, trace, self.rng, self.birth)
         return moves.propose_change(self.model, trace, self.rng)
 
     def prune(self, trace: Trace) -> Trace:

@@ -35,6 +35,9 @@ class Normal:
     def support(self) -> tuple[float, float]:
         return (-math.inf, math.inf)
 
+    def __str__(self) -> str:
+        return f"normal({self.mu:g}, {self.sigma:g})"
+
 
 @dataclass(frozen=True)
 class Uniform:
@@ -54,6 +57,9 @@ class Uniform:
 
     def support(self) -> tuple[float, float]:
         return (self.low, self.high)
+
+    def __str__(self) -> str:
+        return f"uniform({self.low:g}, {self.high:g})"
 
 
 @dataclass(frozen=True)
@@ -82,6 +88,9 @@ class Gamma:
     def support(self) -> tuple[float, float]:
         return (0.0, math.inf)
 
+    def __str__(self) -> str:
+        return f"gamma({self.shape:g}, {self.scale:g})"
+
 
 @dataclass(frozen=True)
 class Categorical:
@@ -108,6 +117,11 @@ class Categorical:
     def support(self) -> tuple[str, ...]:
         return self.values
 
+    def __str__(self) -> str:
+        if len(set(self.probs)) == 1:
+            return f"categorical({', '.join(self.values)})"
+        return "categorical(" + ", ".join(f"{v}: {p:g}" for v, p in zip(self.values, self.probs)) + ")"
+
 
 @dataclass(frozen=True)
 class Poisson:
@@ -124,6 +138,9 @@ class Poisson:
         if self.rate == 0:
             return 0.0 if n == 0 else -math.inf
         return n * math.log(self.rate) - self.rate - special.gammaln(n + 1)
+
+    def __str__(self) -> str:
+        return f"poisson({self.rate:g})"
 
     def pmf(self, n):
         return stats.poisson.pmf(n, self.rate)

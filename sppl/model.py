@@ -58,6 +58,8 @@ class ObjectClass:
     parameters: tuple[Parameter, ...]
     build: Callable[[Values], tuple[Part, ...]]
     footprint_fn: Callable[[Values], np.ndarray] | None = None
+    # The two parameters that place the object on the ground plane, if it has them.
+    position: tuple[str, str] | None = None
 
     def parameter(self, name: str) -> Parameter | None:
         for p in self.parameters:
@@ -99,6 +101,10 @@ class InferenceSettings:
     """Knobs of the derived sampler (thesis Algorithms 1, 2 and 7)."""
 
     p_jump: float = 1.0 / 20.0
+    # Chance that a birth places its object near unexplained observations rather than at a
+    # draw from the prior (sppl/birth.py), and the spread of that placement in metres.
+    data_birth: float = 0.5
+    data_birth_spread: float = 0.25
     # Relative weights of birth, death and change among model jumps (thesis: equal).
     jump_weights: Mapping[str, float] = field(
         default_factory=lambda: {"birth": 1.0, "death": 1.0, "change": 1.0}

@@ -15,12 +15,13 @@ reverse can be checked against each other; docs/inference.md derives them.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from .birth import BirthProposal
 from .model import Model, ObjectClass
 from .trace import SceneObject, Trace, make_object
 
@@ -35,6 +36,8 @@ class Proposal:
     noise: Mapping[str, Mapping[str, float]]
     changed: tuple[SceneObject, ...]  # objects that are new in this proposal
     log_q_ratio: float = 0.0
+    # The part of the ratio that depends on the proposed state's renders, if any.
+    ratio_fn: Callable[[Trace], float] | None = None
 
 
 def jump_probabilities(model: Model) -> dict[str, float]:
@@ -57,13 +60,16 @@ def _log(p: float) -> float:
 # -- proposal densities of the model jumps ---------------------------------------------------
 
 
-def log_q_birth(model: Model, cls: ObjectClass, values: Mapping[str, Any]) -> float:
-    """Density of proposing a birth of exactly this object: the jump type, the class
-    (uniform over classes), and its parameters drawn from the class's prior."""
+def log_q_birth(
+    model: Model, cls: ObjectClass, values: Mapping[str, Any], birth: BirthProposal, state: Trace
+) -> float:
+    """Density of proposing, from ``state``, a birth of exactly this object: the jump type,
+    the class (uniform over classes), and its parameters (``sppl.birth``: the class's prior,
+    or for its position a mixture with a density near what ``state`` leaves unexplained)."""
     return (
         _log(jump_probabilities(model)["birth"])
         - math.log(len(model.classes))
-        + cls.log_prior(values)
+        + birth.log_density(cls, values, state)
     )
 
 
@@ -97,24 +103,32 @@ def log_q_change(
 # -- proposals ---------------------------------------------------------------------------------
 
 
-def propose_birth(model: Model, trace: Trace, rng: np.random.Generator) -> Proposal:
+def propose_birth(
+    model: Model, trace: Trace, rng: np.random.Generator, birth: BirthProposal
+) -> Proposal:
     cls = model.classes[int(rng.integers(len(model.classes)))]
-    values = cls.sample_prior(rng)
+    values = birth.sample(cls, trace, rng)
     obj = make_object(model, cls, values)
     objects = (*trace.objects, obj)
-    ratio = log_q_death(model, len(objects)) - log_q_birth(model, cls, values)
+    ratio = log_q_death(model, len(objects)) - log_q_birth(model, cls, values, birth, trace)
     return Proposal("birth", cls.name, objects, trace.noise, (obj,), ratio)
 
 
-def propose_death(model: Model, trace: Trace, rng: np.random.Generator) -> Proposal | None:
+def propose_death(
+    model: Model, trace: Trace, rng: np.random.Generator, birth: BirthProposal
+) -> Proposal | None:
     n = len(trace.objects)
     if n == 0:
         return None
     k = int(rng.integers(n))
     gone = trace.objects[k]
     objects = trace.objects[:k] + trace.objects[k + 1 :]
-    ratio = log_q_birth(model, gone.cls, gone.values) - log_q_death(model, n)
-    return Proposal("death", gone.cls.name, objects, trace.noise, (), ratio)
+    # The reverse birth starts from the state after the death, which is only known (rendered)
+    # once the proposal is evaluated: that part of the ratio is computed then.
+    return Proposal(
+        "death", gone.cls.name, objects, trace.noise, (), -log_q_death(model, n),
+        lambda after: log_q_birth(model, gone.cls, gone.values, birth, after),
+    )
 
 
 def propose_change(model: Model, trace: Trace, rng: np.random.Generator) -> Proposal | None:

@@ -69,15 +69,25 @@ class Scorer:
         self.terms = terms
         self.cameras = {t.frame: t.camera for t in terms}
 
-    def statistics(self, objects) -> dict[tuple[int, str], np.ndarray]:
+    def evaluate(self, objects):
+        """Render the objects for every camera; return the likelihood statistics of every term
+        and the renders, as (stats, {frame: (rgb, depth)})."""
         parts = [p for o in objects for p in o.parts]
         rendered = {f: self.renderer.render(parts, cam) for f, cam in self.cameras.items()}
-        return {
+        stats = {
             (t.frame, t.kind): t.likelihood.statistics(
                 t.observed, rendered[t.frame][_OUTPUT[t.kind]], t.valid
             )
             for t in self.terms
         }
+        return stats, rendered
+
+    def statistics(self, objects) -> dict[tuple[int, str], np.ndarray]:
+        return self.evaluate(objects)[0]
+
+    def rendered(self, renders, term: Term) -> np.ndarray:
+        """The rendered array a term compares with its observation."""
+        return renders[term.frame][_OUTPUT[term.kind]]
 
     def log_likelihood(
         self, stats: Mapping[tuple[int, str], np.ndarray], noise: Mapping[str, Mapping[str, float]]
@@ -93,6 +103,9 @@ class PriorScorer:
 
     terms: list[Term] = []
     cameras: dict = {}
+
+    def evaluate(self, objects):
+        return {}, {}
 
     def statistics(self, objects) -> dict[tuple[int, str], np.ndarray]:
         return {}

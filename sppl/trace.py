@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -91,6 +91,10 @@ class Trace:
     stats: Mapping[tuple[int, str], np.ndarray]
     log_prior: float
     log_likelihood: float
+    # The renders the statistics came from, {frame: (rgb, depth)}, for proposals that look at
+    # what the hypothesis leaves unexplained; and a cache of what is derived from them.
+    renders: Mapping[int, tuple[np.ndarray, np.ndarray]] | None = field(default=None, repr=False)
+    cache: dict = field(default_factory=dict, repr=False)
 
     @property
     def score(self) -> float:
@@ -122,9 +126,6 @@ class Trace:
                 value = self.noise[kind][p.name]
                 out[("noise", kind, p.name)] = Choice(value, p.log_prob(value))
         return out
-
-    def with_(self, **changes) -> Trace:
-        return replace(self, **changes)
 
     def as_dict(self) -> dict[str, Any]:
         return {

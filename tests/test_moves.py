@@ -28,7 +28,18 @@ def _state(model, sampler, n_balls=1):
 
 def _log_alpha(sampler, trace, proposal):
     new = sampler.evaluate(trace, proposal)
-    return new, new.score - trace.score + proposal.log_q_ratio
+    extra = proposal.ratio_fn(new) if proposal.ratio_fn else 0.0
+    return new, new.score - trace.score + proposal.log_q_ratio + extra
+
+
+def reverse_of_birth(sampler, born):
+    """The death of exactly the object a birth added (the last one)."""
+    model, k = sampler.model, len(born.objects) - 1
+    gone = born.objects[k]
+    return moves.Proposal(
+        "death", gone.cls.name, born.objects[:k], born.noise, (), -moves.log_q_death(model, k + 1),
+        lambda after: moves.log_q_birth(model, gone.cls, gone.values, sampler.birth, after),
+    )
 
 
 def test_birth_ratio_matches_hand_computation(model):
@@ -36,7 +47,7 @@ def test_birth_ratio_matches_hand_computation(model):
     trace = _state(model, sampler, n_balls=1)  # K = 1
     rng = np.random.default_rng(3)
     while True:  # a birth of a block, from the known one-ball state
-        p = moves.propose_birth(model, trace, rng)
+        p = moves.propose_birth(model, trace, rng, sampler.birth)
         if p.label == "block":
             break
     _, log_alpha = _log_alpha(sampler, trace, p)
@@ -49,16 +60,9 @@ def test_birth_then_death_ratios_are_negatives(model):
     trace = _state(model, sampler, n_balls=2)
     rng = np.random.default_rng(5)
     for _ in range(20):
-        birth = moves.propose_birth(model, trace, rng)
+        birth = moves.propose_birth(model, trace, rng, sampler.birth)
         born, a_fwd = _log_alpha(sampler, trace, birth)
-        # The reverse: the death of exactly the object just born (the last one).
-        k = len(born.objects) - 1
-        gone = born.objects[k]
-        death = moves.Proposal(
-            "death", gone.cls.name, born.objects[:k], born.noise, (),
-            moves.log_q_birth(model, gone.cls, gone.values) - moves.log_q_death(model, k + 1),
-        )
-        back, a_rev = _log_alpha(sampler, born, death)
+        back, a_rev = _log_alpha(sampler, born, reverse_of_birth(sampler, born))
         assert a_fwd == pytest.approx(-a_rev)
         assert back.score == pytest.approx(trace.score)
 

@@ -13,6 +13,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from ..domains import Real
 from ..errors import ModelError, ModelErrors, Span
 from ..geometry import Part, rotation_z, scaling, translation
 from ..model import (
@@ -75,7 +76,7 @@ _PRIMITIVES: dict[str, tuple[tuple[str, ...], Callable[..., tuple[float, float, 
 _CONSTRAINTS = ("no_overlap",)
 _SENSOR_KINDS = ("image", "depth")
 _RENDER_KEYS = ("background", "ambient", "light")
-_INFERENCE_KEYS = ("p_jump",)
+_INFERENCE_KEYS = ("p_jump", "data_birth", "data_birth_spread")
 _JUMPS = ("birth", "death", "change")
 
 
@@ -96,6 +97,7 @@ class _PendingClass(_Owner):
     rate: float | None = None
     parts: list[tuple[Span, Callable[[Values], Part]]] = field(default_factory=list)
     span: Span | None = None  # of the class's first definition
+    position: tuple[str, str] | None = None
 
 
 @dataclass
@@ -159,7 +161,9 @@ class _Compiler:
 
     def _model(self) -> Model:
         classes = tuple(
-            ObjectClass(c.name, c.rate, tuple(c.parameters), _build(c, self.program))
+            ObjectClass(
+                c.name, c.rate, tuple(c.parameters), _build(c, self.program), position=c.position
+            )
             for c in self.classes.values()
         )
         sensors = {
@@ -260,6 +264,7 @@ class _Compiler:
                 pending.rate = self._count(item, local)
             else:
                 self._add_parameter(pending, item, local)
+        pending.position = _ground_position(node, pending)
         if count is None:
             self.error(
                 f"class `{name}` has no count", node.name.span, "add a line `count ~ poisson(rate)`"
@@ -498,11 +503,22 @@ class _Compiler:
                 hint = did_you_mean(item.key.text, _INFERENCE_KEYS + ("step", "jump_weights"))
                 self._unknown_setting(item, "inference", _INFERENCE_KEYS, hint)
             elif self._first(("inference", item.key.text), item):
-                p_jump = self.expr.constant(item.value, scope)
-                if p_jump is not None and not 0.0 <= p_jump <= 1.0:
-                    self.error(f"`p_jump` is a probability, got {p_jump:g}", item.value.span)
-                elif p_jump is not None:
-                    self.inference["p_jump"] = p_jump
+                key = item.key.text
+                value = self.expr.constant(item.value, scope)
+                if value is None:
+                    continue
+                if key == "p_jump" and not 0.0 <= value <= 1.0:
+                    self.error(f"`p_jump` is a probability, got {value:g}", item.value.span)
+                elif key == "data_birth" and not 0.0 <= value < 1.0:
+                    self.error(
+                        f"`data_birth` is a probability below 1, got {value:g}",
+                        item.value.span,
+                        "with 1 a birth could never land where nothing is unexplained",
+                    )
+                elif key == "data_birth_spread" and not value > 0.0:
+                    self.error(f"`data_birth_spread` must be positive, got {value:g}", item.value.span)
+                else:
+                    self.inference[key] = value
 
     def _jump_weight_settings(self, node: ast.JumpWeights, scope: Scope) -> None:
         for setting in node.weights:
@@ -633,6 +649,23 @@ def _part(
         return Part(primitive, matrix, tuple(float(c) for c in colour_fn(values)))
 
     return part
+
+
+def _ground_position(node: ast.ClassDef, pending: _PendingClass) -> tuple[str, str] | None:
+    """The two parameters that place the object on the ground, when its first geometry line
+    says ``at (x, y ...)`` with two real-valued parameters of the class: data-driven birth
+    proposals draw these near unexplained observations instead of from their prior."""
+    reals = {p.name for p in pending.parameters if isinstance(p.domain, Real)}
+    for item in node.body:
+        if isinstance(item, ast.Geometry):
+            for m in item.modifiers:
+                if m.keyword == "at" and isinstance(m.value, ast.Tuple):
+                    a, b = m.value.items[:2]
+                    if isinstance(a, ast.Name) and isinstance(b, ast.Name) and a.id != b.id:
+                        if {a.id, b.id} <= reals:
+                            return (a.id, b.id)
+            return None
+    return None
 
 
 def _build(pending: _PendingClass, program: ast.Program) -> Callable[[Values], tuple[Part, ...]]:
