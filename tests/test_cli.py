@@ -162,3 +162,22 @@ class cylinder {
     assert [o["class"] for o in summary["map"]["objects"]] == ["cylinder"]
     assert summary["map"]["objects"][0]["params"]["c"] == "green"
     assert summary["class_counts"]["cylinder"].get("1", 0) > 0.5
+
+
+def test_sample_runs_on_the_shipped_example(root, tmp_path, require_gl):
+    r = run("sample", root / "models" / "shapes.scn", "--obs", root / "examples" / "three_shapes" / "obs",
+            "--steps", "200", "--out", tmp_path / "run", "-q")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["steps_done"] == 200 and summary["map"]["score"] > 0
+
+
+@pytest.mark.slow
+def test_the_shipped_example_is_solved_with_default_settings(root, require_gl):
+    """The full check lives in benchmarks/time_to_solution.py; this is one seed of it."""
+    r = subprocess.run(
+        [sys.executable, str(root / "benchmarks" / "time_to_solution.py"), "--seeds", "0"],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert r.returncode == 0, r.stderr
+    assert "solved 1 of 1 seeds" in r.stdout, r.stdout
