@@ -108,7 +108,9 @@ class BirthProposal:
             return cls.log_prior(values)
         px, py = (cls.parameter(n) for n in cls.position)
         x, y = values[px.name], values[py.name]
-        rest = sum(p.log_prob(values[p.name]) for p in cls.parameters if p not in (px, py))
+        # The other parameters are drawn from their priors; none of them depends on the
+        # position (the compiler only declares a position that nothing depends on).
+        rest = cls.log_prior(values, only=[n for n in cls.parameter_names if n not in cls.position])
         log_prior_xy = px.log_prob(x) + py.log_prob(y)
         d2 = ((pts - (x, y)) ** 2).sum(axis=1)
         h2 = self.spread**2

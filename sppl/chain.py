@@ -61,6 +61,12 @@ class Sampler:
             kind: {p.name: p.prior.sample(self.rng) for p in sensor.noise}
             for kind, sensor in self.model.sensors.items()
         }
+        if not objects and any(c.count for c in self.model.classes):
+            # A class with a fixed count gives the empty scene no prior density: start from a
+            # prior draw of those objects instead.
+            from .simulate import fixed_objects
+
+            objects = fixed_objects(self.model, self.rng)
         return self.make_trace(tuple(objects), noise)
 
     def make_trace(self, objects, noise) -> Trace:

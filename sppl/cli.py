@@ -38,6 +38,13 @@ def _parser() -> argparse.ArgumentParser:
     c = sub.add_parser("check", help="parse and validate a model file, list its classes")
     c.add_argument("model", type=Path, help="the model file (.scn)")
 
+    f = sub.add_parser("fmt", help="print a model file in canonical form (comments kept)")
+    f.add_argument("models", type=Path, nargs="+", metavar="model", help="model files (.scn)")
+    how = f.add_mutually_exclusive_group()
+    how.add_argument("--check", action="store_true",
+                     help="print nothing; exit 1 if a file is not in canonical form")
+    how.add_argument("--write", "-w", action="store_true", help="rewrite the files in place")
+
     s = sub.add_parser(
         "simulate",
         help="draw a scene (or take one), render every camera, add sensor noise, write obs/",
@@ -87,7 +94,12 @@ def cmd_check(args) -> int:
     model = load_model(args.model)
     print(f"{args.model}: {len(model.classes)} classes, sensors: {', '.join(model.sensors) or 'none'}")
     for cls in model.classes:
-        print(f"class {cls.name}  (count ~ poisson({cls.rate:g}))")
+        if cls.count is not None:
+            count = f"count = {cls.count}"
+        else:
+            count = f"count ~ poisson({cls.rate:g})"
+            count += "" if cls.max_count is None else f", at most {cls.max_count}"
+        print(f"class {cls.name}  ({count}{', floating' if cls.floating else ''})")
         for p in cls.parameters:
             print(f"  {p.name:<10} {p.domain.describe():<24} ~ {p.prior}")
     for kind, s in model.sensors.items():
@@ -95,7 +107,33 @@ def cmd_check(args) -> int:
         print(f"sensor {kind}: likelihood {s.likelihood}; {noise}")
     if model.no_overlap:
         print("constraint: no two footprints overlap")
+    if model.max_objects is not None:
+        print(f"constraint: at most {model.max_objects} objects in all")
+    if model.static_parts:
+        print(f"static scene: {len(model.static_parts)} fixed parts")
     return 0
+
+
+def cmd_fmt(args) -> int:
+    from .lang.compile import read_source
+    from .lang.pretty import format_source
+
+    changed = []
+    for path in args.models:
+        text = read_source(path)
+        canonical = format_source(text, str(path))
+        if args.check:
+            if canonical != text:
+                changed.append(path)
+                print(f"{path}: not in canonical form (sppl fmt --write {path} fixes it)",
+                      file=sys.stderr)
+        elif args.write:
+            if canonical != text:
+                path.write_text(canonical, encoding="utf-8")
+                print(f"reformatted {path}", file=sys.stderr)
+        else:
+            sys.stdout.write(canonical)
+    return 1 if changed else 0
 
 
 def cmd_simulate(args) -> int:
@@ -144,7 +182,7 @@ def cmd_sample(args) -> int:
     return 130 if result.summary["interrupted"] else 0
 
 
-COMMANDS = {"check": cmd_check, "simulate": cmd_simulate, "sample": cmd_sample}
+COMMANDS = {"check": cmd_check, "fmt": cmd_fmt, "simulate": cmd_simulate, "sample": cmd_sample}
 
 
 def main(argv: list[str] | None = None) -> int:

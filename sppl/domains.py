@@ -83,6 +83,44 @@ class Periodic:
 
 
 @dataclass(frozen=True)
+class Integer:
+    """Whole numbers in ``[low, high]`` (either end may be infinite).
+
+    A step moves by a nonzero amount whose size and sign are drawn symmetrically, so it is
+    never a wasted no-op; at a bound it folds back as a mirror placed half a unit outside the
+    bound, which keeps the proposal symmetric (the same argument as ``Interval``'s reflection).
+    """
+
+    low: float = -math.inf
+    high: float = math.inf
+
+    def contains(self, x) -> bool:
+        try:
+            whole = float(x) == int(x)
+        except (TypeError, ValueError, OverflowError):
+            return False
+        return whole and self.low <= x <= self.high
+
+    def step(self, x: int, scale: float, rng: np.random.Generator) -> int:
+        size = 1 + int(abs(scale * float(rng.standard_normal())))
+        y = int(x) + (size if rng.random() < 0.5 else -size)
+        if math.isinf(self.low) and math.isinf(self.high):
+            return y
+        if math.isinf(self.high):
+            return y if y >= self.low else int(2 * self.low - 1 - y)
+        if math.isinf(self.low):
+            return y if y <= self.high else int(2 * self.high + 1 - y)
+        n = int(self.high - self.low) + 1
+        z = (y - int(self.low)) % (2 * n)
+        return int(self.low) + (z if z < n else 2 * n - 1 - z)
+
+    def describe(self) -> str:
+        if math.isinf(self.low) and math.isinf(self.high):
+            return "integer"
+        return f"integer({self.low:g}, {self.high:g})"
+
+
+@dataclass(frozen=True)
 class Finite:
     """A categorical parameter: one of a fixed tuple of names (colours, say)."""
 
@@ -102,8 +140,8 @@ class Finite:
         return "categorical(" + ", ".join(self.values) + ")"
 
 
-Domain = Real | Positive | Interval | Periodic | Finite
+Domain = Real | Positive | Interval | Periodic | Integer | Finite
 
 
 def is_continuous(domain: Domain) -> bool:
-    return not isinstance(domain, Finite)
+    return not isinstance(domain, Finite | Integer)

@@ -79,7 +79,15 @@ class ModelErrors(ModelError):
     """Several errors found in one model file, reported together, sorted by position."""
 
     def __init__(self, errors: list[ModelError]) -> None:
-        errors = sorted(errors, key=lambda e: (e.span.line, e.span.column) if e.span else (0, 0))
+        # Sorted by position within each file, the files in the order they first appear (a
+        # model's own errors first, then those of a file it imports).
+        files: dict[str | None, int] = {}
+        for e in errors:
+            files.setdefault(e.path, len(files))
+        errors = sorted(
+            errors,
+            key=lambda e: (files[e.path], (e.span.line, e.span.column) if e.span else (0, 0)),
+        )
         first = errors[0]
         super().__init__(
             first.message, path=first.path, span=first.span, source=first.source, hint=first.hint

@@ -9,7 +9,9 @@ Unit shapes (before the part's matrix):
 - ``box``: x and y in [-1/2, 1/2], z in [0, 1] (scale by width, depth, height);
 - ``cylinder``: radius 1, z in [0, 1] (scale by radius, radius, height);
 - ``cone``: base radius 1 at z = 0, apex at z = 1 (scale by radius, radius, height);
-- ``sphere``: radius 1 centred at z = 1 (scale by the radius: it then rests on the ground).
+- ``sphere``: radius 1 centred at z = 1 (scale by the radius: it then rests on the ground);
+- ``mesh:<absolute path>``: a mesh loaded from a file (OBJ, PLY, STL, GLB, ...), in its own
+  coordinates, which the model file's scale and pose then act on (``load_mesh``).
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ import shapely
 import trimesh
 
 PRIMITIVES = ("box", "cylinder", "cone", "sphere")
+# A part whose primitive is MESH_PREFIX + an absolute path draws the mesh in that file.
+MESH_PREFIX = "mesh:"
 
 # Round shapes are drawn and footprinted as polygons with this many sides: enough that the
 # polygon differs from the circle by under 0.2% of the radius.
@@ -74,8 +78,24 @@ def unit_mesh(primitive: str) -> trimesh.Trimesh:
     elif primitive == "sphere":
         mesh = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
         mesh.apply_translation((0.0, 0.0, 1.0))
+    elif primitive.startswith(MESH_PREFIX):
+        mesh = load_mesh(primitive[len(MESH_PREFIX) :])
     else:
         raise KeyError(f"unknown primitive {primitive!r}; expected one of {', '.join(PRIMITIVES)}")
+    return mesh
+
+
+def load_mesh(path: str) -> trimesh.Trimesh:
+    """The triangles of a mesh file, as one trimesh; ValueError if it holds none.
+
+    Scenes (GLB, say) are flattened into one mesh with their nodes' transforms applied.
+    """
+    try:
+        mesh = trimesh.load(path, force="mesh")
+    except Exception as error:  # trimesh raises many types for a malformed file
+        raise ValueError(f"{type(error).__name__}: {error}") from error
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise ValueError("it holds no triangles")
     return mesh
 
 
@@ -83,9 +103,17 @@ def unit_mesh(primitive: str) -> trimesh.Trimesh:
 def _outline(primitive: str) -> np.ndarray:
     """Points of the unit shape whose convex hull, seen from above, is its footprint.
 
-    Exact for the box; for round shapes, the inscribed regular polygon at their widest height.
+    Exact for the box; for round shapes, the inscribed regular polygon at their widest height;
+    for a mesh, the vertices of its convex hull.
     Kept in homogeneous coordinates so a part's matrix poses them directly.
     """
+    if primitive.startswith(MESH_PREFIX):
+        mesh = unit_mesh(primitive)
+        try:
+            vertices = mesh.convex_hull.vertices
+        except Exception:  # a flat or degenerate mesh has no hull volume
+            vertices = mesh.vertices
+        return np.column_stack([vertices, np.ones(len(vertices))])
     if primitive == "box":
         xy = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
         zs = (0.0, 1.0)

@@ -10,7 +10,7 @@ sensor's likelihood with the priors on its noise parameters.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,21 +26,44 @@ Values = Mapping[str, Any]
 
 @dataclass(frozen=True)
 class Parameter:
-    """One random choice of an object (or of a sensor's noise): its domain, prior and step."""
+    """One random choice of an object (or of a sensor's noise): its domain, prior and step.
+
+    A prior may depend on other values of the same object (``h ~ uniform(r, 2 * r)``): then
+    ``prior_fn`` makes the distribution from the object's values, ``depends_on`` names the
+    parameters it reads, and ``prior`` is only a ``Dependent`` placeholder with its text.
+    ``sample`` and ``log_prob`` take those values; for an independent prior they may be left
+    out, and ``prior`` is the distribution itself.
+    """
 
     name: str
     domain: Domain
     prior: Distribution
     proposal_scale: float = 0.1
+    prior_fn: Callable[[Values], Distribution] | None = None
+    depends_on: tuple[str, ...] = ()
 
     @property
     def continuous(self) -> bool:
         return is_continuous(self.domain)
 
-    def log_prob(self, value: Any) -> float:
+    def distribution(self, values: Values | None = None) -> Distribution:
+        """The prior, given the object's other values when it depends on them."""
+        if self.prior_fn is None:
+            return self.prior
+        if values is None:
+            raise TypeError(
+                f"the prior of `{self.name}` depends on {', '.join(self.depends_on)}: "
+                "pass the object's values"
+            )
+        return self.prior_fn(values)
+
+    def sample(self, rng: np.random.Generator, values: Values | None = None) -> Any:
+        return self.distribution(values).sample(rng)
+
+    def log_prob(self, value: Any, values: Values | None = None) -> float:
         if not self.domain.contains(value):
             return -math.inf
-        return self.prior.log_prob(value)
+        return self.distribution(values).log_prob(value)
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,6 +83,15 @@ class ObjectClass:
     footprint_fn: Callable[[Values], np.ndarray] | None = None
     # The two parameters that place the object on the ground plane, if it has them.
     position: tuple[str, str] | None = None
+    # A fixed number of objects of this class in every scene, instead of Poisson(rate) many;
+    # and an upper bound on the number (a Poisson count truncated to at most max_count).
+    count: int | None = None
+    max_count: int | None = None
+    # A floating object does not rest on the ground: the no-overlap constraint leaves it out.
+    floating: bool = False
+    # Declared change-of-class correspondences: {other class: {parameter here: parameter
+    # there}}, carried as-is by a change between the two classes (sppl.moves).
+    correspondences: Mapping[str, Mapping[str, str]] = field(default_factory=dict)
 
     def parameter(self, name: str) -> Parameter | None:
         for p in self.parameters:
@@ -71,11 +103,38 @@ class ObjectClass:
     def parameter_names(self) -> tuple[str, ...]:
         return tuple(p.name for p in self.parameters)
 
-    def sample_prior(self, rng: np.random.Generator) -> dict[str, Any]:
-        return {p.name: p.prior.sample(rng) for p in self.parameters}
+    def sample_prior(
+        self, rng: np.random.Generator, given: Values | None = None
+    ) -> dict[str, Any]:
+        """Values drawn from the prior; those in ``given`` are kept and the others drawn
+        conditionally on them. ``parameters`` is in dependency order, so each prior's
+        arguments are known when it is drawn."""
+        values = dict(given or {})
+        for p in self.parameters:
+            if p.name not in values:
+                values[p.name] = p.sample(rng, values)
+        return values
 
-    def log_prior(self, values: Values) -> float:
-        return sum(p.log_prob(values[p.name]) for p in self.parameters)
+    def log_prior(self, values: Values, only: Collection[str] | None = None) -> float:
+        """log p(values), or, with ``only``, the log density of those parameters given the
+        others (the density of drawing them with ``sample_prior(rng, given=the others)``)."""
+        total = 0.0
+        for p in self.parameters:
+            if only is not None and p.name not in only:
+                continue
+            total += p.log_prob(values[p.name], values)
+            if total == -math.inf:
+                break  # a dependent prior must not see values outside their domains
+        return total
+
+    def sample_count(self, rng: np.random.Generator) -> int:
+        """A draw of the number of objects of this class, ignoring any other constraint."""
+        if self.count is not None:
+            return self.count
+        while True:
+            n = int(rng.poisson(self.rate))
+            if self.max_count is None or n <= self.max_count:
+                return n
 
     def parts(self, values: Values) -> tuple[Part, ...]:
         return tuple(self.build(values))
@@ -128,6 +187,10 @@ class Model:
     colours: Mapping[str, tuple[float, float, float]] = field(default_factory=dict)
     # The hard constraint of thesis 3.1.3: no two objects' footprints share area.
     no_overlap: bool = False
+    # An upper bound on the total number of objects in a scene, if any.
+    max_objects: int | None = None
+    # Fixed parts every hypothesis renders: the ground plane, a table that is always there.
+    static_parts: tuple[Part, ...] = ()
     path: Path | None = None
     source: str = ""
 

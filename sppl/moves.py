@@ -78,11 +78,22 @@ def log_q_death(model: Model, n_objects: int) -> float:
     return _log(jump_probabilities(model)["death"]) - math.log(n_objects)
 
 
-def carried_parameters(old: ObjectClass, new: ObjectClass) -> tuple[str, ...]:
-    """Parameters a change of class keeps: same name and same domain in both classes."""
-    return tuple(
-        p.name for p in new.parameters if (q := old.parameter(p.name)) is not None and q.domain == p.domain
-    )
+def carried_parameters(old: ObjectClass, new: ObjectClass) -> dict[str, str]:
+    """Parameters a change of class keeps, as {parameter of new: parameter of old}: the pairs
+    the model declares (``change a.p <-> b.q``), and the others with the same name and the
+    same domain in both classes. The pairing is the same in both directions, reversed, so a
+    change and its reverse carry the same values and drop the same ones (no Jacobian: the
+    carried values are copied as they are)."""
+    declared = dict(new.correspondences.get(old.name, {}))
+    taken = set(declared.values())
+    carried = {}
+    for p in new.parameters:
+        if p.name in declared:
+            carried[p.name] = declared[p.name]
+        elif p.name not in taken and (q := old.parameter(p.name)) is not None:
+            if q.domain == p.domain and p.name not in old.correspondences.get(new.name, {}):
+                carried[p.name] = p.name
+    return carried
 
 
 def log_q_change(
@@ -90,13 +101,13 @@ def log_q_change(
 ) -> float:
     """Density of changing a given object from ``old`` to ``new`` with these new values: the
     object (uniform), the new class (uniform over the others), and the parameters that are not
-    carried over drawn from ``new``'s prior."""
+    carried over drawn from ``new``'s prior, given the carried ones where it depends on them."""
     carried = set(carried_parameters(old, new))
     return (
         _log(jump_probabilities(model)["change"])
         - math.log(n_objects)
         - math.log(len(model.classes) - 1)
-        + sum(p.log_prob(new_values[p.name]) for p in new.parameters if p.name not in carried)
+        + new.log_prior(new_values, only=[n for n in new.parameter_names if n not in carried])
     )
 
 
@@ -139,11 +150,10 @@ def propose_change(model: Model, trace: Trace, rng: np.random.Generator) -> Prop
     old = trace.objects[k]
     others = [c for c in model.classes if c is not old.cls]
     new_cls = others[int(rng.integers(len(others)))]
-    carried = set(carried_parameters(old.cls, new_cls))
-    values = {
-        p.name: old.values[p.name] if p.name in carried else p.prior.sample(rng)
-        for p in new_cls.parameters
-    }
+    carried = carried_parameters(old.cls, new_cls)
+    # The dropped parameters are drawn from the new class's prior, in its dependency order,
+    # given the carried ones.
+    values = new_cls.sample_prior(rng, given={n: old.values[q] for n, q in carried.items()})
     obj = make_object(model, new_cls, values)
     objects = trace.objects[:k] + (obj,) + trace.objects[k + 1 :]
     ratio = log_q_change(model, n, new_cls, old.cls, old.values) - log_q_change(

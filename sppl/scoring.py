@@ -72,7 +72,7 @@ class Scorer:
     def evaluate(self, objects):
         """Render the objects for every camera; return the likelihood statistics of every term
         and the renders, as (stats, {frame: (rgb, depth)})."""
-        parts = [p for o in objects for p in o.parts]
+        parts = [*self.model.static_parts, *(p for o in objects for p in o.parts)]
         rendered = {f: self.renderer.render(parts, cam) for f, cam in self.cameras.items()}
         stats = {
             (t.frame, t.kind): t.likelihood.statistics(

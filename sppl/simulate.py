@@ -16,24 +16,40 @@ import numpy as np
 from .errors import SpplError
 from .model import Model
 from .observations import CameraSpec, Frame
-from .trace import SceneObject, make_object, scene_is_valid
+from .trace import SceneObject, counts_allowed, make_object, scene_is_valid
 
 
 def sample_objects(model: Model, rng: np.random.Generator, max_tries: int = 10_000):
-    """Objects drawn from the prior: Poisson counts per class, parameters from each class's
-    prior, and, under the no-overlap constraint, whole scenes redrawn until none overlap
-    (rejection sampling, which is exactly the constrained prior)."""
+    """Objects drawn from the prior: Poisson (or fixed) counts per class, parameters from each
+    class's prior, and, under the no-overlap constraint or a bound on the total, whole scenes
+    redrawn until they keep it (rejection sampling, which is exactly the constrained prior)."""
     for _ in range(max_tries):
         objects = [
             make_object(model, cls, cls.sample_prior(rng))
             for cls in model.classes
-            for _ in range(int(rng.poisson(cls.rate)))
+            for _ in range(cls.sample_count(rng))
         ]
-        if scene_is_valid(objects):
+        if counts_allowed(model, objects) and scene_is_valid(objects):
             return tuple(objects)
     raise SpplError(
         f"no scene without overlapping objects in {max_tries} draws from the prior; "
         "lower the classes' rates or widen the position priors"
+    )
+
+
+def fixed_objects(model: Model, rng: np.random.Generator, max_tries: int = 10_000):
+    """A starting scene for a chain: the objects of the classes with a fixed count, drawn from
+    their priors (an empty scene has no prior density when a class must have objects)."""
+    fixed = [c for c in model.classes if c.count]
+    for _ in range(max_tries):
+        objects = [
+            make_object(model, cls, cls.sample_prior(rng)) for cls in fixed for _ in range(cls.count)
+        ]
+        if counts_allowed(model, objects) and scene_is_valid(objects):
+            return tuple(objects)
+    raise SpplError(
+        f"no arrangement of the fixed-count objects keeps the model's constraints in {max_tries}"
+        " draws from the prior"
     )
 
 
@@ -85,7 +101,7 @@ def render_observations(
     """Render each camera and add each modality's noise from the model's likelihoods."""
     from .likelihoods import get_likelihood
 
-    parts = [p for o in objects for p in o.parts]
+    parts = [*model.static_parts, *(p for o in objects for p in o.parts)]
     frames = []
     for spec in cameras:
         cam, modalities = spec.camera, spec.modalities

@@ -61,14 +61,37 @@ def make_object(model: Model, cls: ObjectClass, values: Mapping[str, Any]) -> Sc
     if not math.isfinite(log_prior):
         return SceneObject(cls, values, -math.inf, ())
     parts = cls.parts(values)
-    footprint = shapely.Polygon(cls.footprint(values)) if model.no_overlap else None
+    # A floating object has no footprint on the ground, so the constraint leaves it out.
+    constrained = model.no_overlap and not cls.floating
+    footprint = shapely.Polygon(cls.footprint(values)) if constrained else None
     return SceneObject(cls, values, log_prior, parts, footprint)
 
 
 def overlaps_any(obj: SceneObject, others) -> bool:
     if obj.footprint is None:
         return False
-    return any(o is not obj and footprints_overlap(obj.footprint, o.footprint) for o in others)
+    return any(
+        o is not obj and o.footprint is not None and footprints_overlap(obj.footprint, o.footprint)
+        for o in others
+    )
+
+
+def counts_allowed(model: Model, objects) -> bool:
+    """Whether the numbers of objects keep the model's count constraints: fixed counts, a
+    class's upper bound, and the bound on the total."""
+    objects = list(objects)
+    if model.max_objects is not None and len(objects) > model.max_objects:
+        return False
+    bounded = [c for c in model.classes if c.count is not None or c.max_count is not None]
+    if not bounded:
+        return True
+    n = dict.fromkeys(model.classes, 0)
+    for o in objects:
+        n[o.cls] = n.get(o.cls, 0) + 1
+    return all(
+        (c.count is None or n[c] == c.count) and (c.max_count is None or n[c] <= c.max_count)
+        for c in bounded
+    )
 
 
 def scene_is_valid(objects) -> bool:
@@ -120,7 +143,9 @@ class Trace:
         for i, o in enumerate(self.objects):
             out[("object", i, "class")] = Choice(o.cls.name, math.log(o.cls.rate))
             for p in o.cls.parameters:
-                out[("object", i, p.name)] = Choice(o.values[p.name], p.log_prob(o.values[p.name]))
+                out[("object", i, p.name)] = Choice(
+                    o.values[p.name], p.log_prob(o.values[p.name], o.values)
+                )
         for kind, sensor in self.model.sensors.items():
             for p in sensor.noise:
                 value = self.noise[kind][p.name]
@@ -135,6 +160,10 @@ class Trace:
 
 
 def objects_log_prior(model: Model, objects) -> float:
+    # Fixed and bounded counts restrict the Poisson prior to the allowed counts; the
+    # normalising constant that this leaves out does not depend on the state.
+    if not counts_allowed(model, objects):
+        return -math.inf
     return -sum(c.rate for c in model.classes) + sum(o.log_prior for o in objects)
 
 

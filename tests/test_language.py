@@ -13,6 +13,8 @@ from sppl.distributions import Categorical, Gamma, Normal, Uniform
 from sppl.domains import Finite, Interval, Periodic, Positive, Real
 from sppl.errors import ModelError, ModelErrors
 from sppl.lang import ast, compile_model, load_model, parse
+from sppl.likelihoods import Gaussian, register_likelihood
+from sppl.model import InferenceSettings
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 
@@ -135,7 +137,7 @@ def test_shapes_sensors_render_and_inference(shapes):
     assert shapes.render.background == (0.5, 0.5, 0.5)
     assert shapes.render.ambient == 0.35
     assert shapes.render.light == (0.4, -0.3, 1.0)
-    assert shapes.inference.p_jump == pytest.approx(1 / 20)
+    assert shapes.inference.p_jump == pytest.approx(1 / 2)
     assert shapes.no_overlap
     assert shapes.colours["green"] == (0.15, 0.70, 0.20)
 
@@ -297,7 +299,9 @@ def test_qualified_step_wins_and_jump_weights():
     block = model.object_class("block")
     assert block.parameter("x").proposal_scale == 0.5
     assert block.parameter("y").proposal_scale == 0.1
-    assert model.inference.jump_weights == {"birth": 2.0, "death": 2.0, "change": 1.0}
+    assert model.inference.jump_weights == {
+        **InferenceSettings().jump_weights, "birth": 2.0, "death": 2.0
+    }
     assert model.inference.p_jump == pytest.approx(1 / 20)  # the default
 
 
@@ -511,7 +515,7 @@ def test_gamma_on_real_and_uniform_inside_periodic_are_fine():
             "y : real",
             "x : real",
             "x : real ~ normal(0, spread)\n    w",
-            "class `block` already has a parameter `x` (line 8)",
+            "class `block` already has a parameter or derived quantity `x` (line 8)",
         ),
         ("y : real", "spread : real", "spread : real", "`spread` is already defined on line 5"),
     ],
@@ -535,12 +539,12 @@ def test_use_before_definition():
     assert_error_at(only_error(text), text, "a + 1", "`a` is used in its own definition")
 
 
-def test_parameter_used_in_geometry_before_its_declaration():
+def test_inside_a_class_declarations_may_come_in_any_order():
     text = edited(
         "    c : colour ~ categorical(red, blue)\n    geometry box(w, w, w) at (x, y) colour c",
         "    geometry box(w, w, w) at (x, y) colour c\n    c : colour ~ categorical(red, blue)",
     )
-    assert_error_at(only_error(text), text, "c\n", "`c` is used before its definition on line 12")
+    assert compile_model(text).object_class("block").parameter_names[-1] == "c"
 
 
 def test_colour_used_before_the_palette():
@@ -552,9 +556,14 @@ def test_colour_used_before_the_palette():
     ]
 
 
-def test_prior_may_not_use_a_parameter():
-    text = edited("y : real ~ normal(0, spread)", "y : real ~ normal(x, spread)")
-    assert_error_at(only_error(text), text, "x, spread", "a prior may use constants only")
+def test_noise_prior_may_not_use_a_parameter():
+    text = BASE + (
+        "sensor image {\n    likelihood gaussian\n    sigma : positive ~ gamma(2, tau)\n"
+        "    tau : positive ~ gamma(2, 1)\n}\n"
+    )
+    first, second = errors(text)
+    assert_error_at(first, text, "tau)", "a noise prior may use constants only")
+    assert_error_at(second, text, "tau :", "the gaussian likelihood has no noise parameter `tau`")
 
 
 def test_model_without_classes():
@@ -598,7 +607,12 @@ def test_colour_of_geometry_must_be_a_colour():
         ("render { ambiant = 0.3 }", "ambiant", "unknown render setting `ambiant`", "ambient"),
         ("inference { p_jmp = 0.1 }", "p_jmp", "unknown inference setting `p_jmp`", "p_jump"),
         ("inference { jump_weights brith = 1 }", "brith", "unknown jump `brith`", "birth"),
-        ("sensor imag { likelihood gaussian }", "imag", "unknown sensor `imag`", "image"),
+        (
+            "sensor imag { likelihood gaussian sigma : positive ~ gamma(2, 1) }",
+            "imag",
+            "unknown sensor `imag`",
+            "image",
+        ),
         ("constraint no_overlop", "no_overlop", "unknown constraint `no_overlop`", "no_overlap"),
     ],
 )
@@ -638,13 +652,26 @@ def test_sensor_errors():
     assert_error_at(only_error(text), text, "normal(0, 1)", "does not fit the domain positive")
 
 
+class _ScaledGaussian(Gaussian):
+    """A likelihood with an option, registered for the tests below."""
+
+    noise_parameters = ("sigma",)
+
+    def __init__(self, gain: float = 1.0, offset: float = 0.0) -> None:
+        self.gain, self.offset = gain, offset
+
+
+register_likelihood("scaled_gaussian", _ScaledGaussian)
+
+
 def test_sensor_options_and_noise_steps():
     model = compile_model(
-        BASE + "sensor depth {\n    likelihood gaussian\n    depth_max = 2 * 5\n"
+        BASE + "sensor depth {\n    likelihood scaled_gaussian(gain = 2)\n    offset = 2 * 5\n"
         "    sigma : positive ~ gamma(2, 0.1)\n}\ninference { step depth.sigma = 0.02 }\n"
     )
     depth = model.sensors["depth"]
-    assert depth.options == {"depth_max": 10.0}
+    assert depth.likelihood == "scaled_gaussian"
+    assert depth.options == {"gain": 2.0, "offset": 10.0}
     assert depth.noise[0].proposal_scale == 0.02
 
 

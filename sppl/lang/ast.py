@@ -81,6 +81,14 @@ class UnaryOp:
 
 
 @dataclass(frozen=True)
+class String:
+    """Text in double quotes: a file name (an import, a mesh)."""
+
+    value: str
+    span: Span
+
+
+@dataclass(frozen=True)
 class Tuple:
     """``(a, b, ...)`` with at least two items: a position, a light direction, a colour."""
 
@@ -88,7 +96,7 @@ class Tuple:
     span: Span
 
 
-Expr = Number | Name | Call | BinOp | UnaryOp
+Expr = Number | Name | Call | BinOp | UnaryOp | String
 Value = Expr | Tuple
 
 
@@ -104,7 +112,19 @@ class ColourDef:
 
 @dataclass(frozen=True)
 class Colours:
+    """``colours { ... }``, or ``colours NAME { ... }``, which also names the set: a palette."""
+
+    name: Ident | None
     definitions: tuple[ColourDef, ...]
+    span: Span
+
+
+@dataclass(frozen=True)
+class Import:
+    """``import "file.scn"`` (``names`` None: everything) or ``from "file.scn" import a, b``."""
+
+    path: String
+    names: tuple[Ident, ...] | None
     span: Span
 
 
@@ -127,11 +147,13 @@ class Choice:
 
 @dataclass(frozen=True)
 class Modifier:
-    """``at (x, y)``, ``rotate angle`` or ``colour c`` after a geometry's primitive."""
+    """``at (x, y)``, ``rotate angle [about (x, y, z)]``, ``scale s``, ``colour c`` or
+    ``size s`` after a geometry's primitive, a pose, a footprint or the ground."""
 
-    keyword: str  # at, rotate or colour (``color`` is read as ``colour``)
+    keyword: str  # at, rotate, scale, colour (``color`` is read as ``colour``) or size
     value: Value
     span: Span
+    axis: Tuple | None = None  # rotate's ``about (x, y, z)``
 
 
 @dataclass(frozen=True)
@@ -147,15 +169,69 @@ class Geometry:
 
 
 @dataclass(frozen=True)
+class Pose:
+    """``pose at (x, y) rotate a``: where the whole object is; its parts are posed in it."""
+
+    modifiers: tuple[Modifier, ...]
+    span: Span
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """``footprint rectangle(w, d)`` or ``footprint circle(r)``, in place of the derived one."""
+
+    shape: Call
+    modifiers: tuple[Modifier, ...]
+    span: Span
+
+
+@dataclass(frozen=True)
+class Floating:
+    """``floating``: the class's objects do not rest on the ground."""
+
+    span: Span
+
+
+@dataclass(frozen=True)
 class ClassDef:
     name: Ident
-    body: tuple[Choice | Geometry, ...]
+    body: tuple[Choice | Let | Setting | Geometry | Pose | Footprint | Floating, ...]
+    span: Span
+
+
+@dataclass(frozen=True)
+class StaticDef:
+    """``static NAME { geometry ... }``: fixed parts every hypothesis renders."""
+
+    name: Ident
+    body: tuple[Geometry | Pose, ...]
+    span: Span
+
+
+@dataclass(frozen=True)
+class Ground:
+    """``ground colour c [size s]``: a flat square under the scene, its top at z = 0."""
+
+    modifiers: tuple[Modifier, ...]
+    span: Span
+
+
+@dataclass(frozen=True)
+class Change:
+    """``change a.p <-> b.q``: a change of class between a and b carries p's value to q."""
+
+    first_class: Ident
+    first: Ident
+    second_class: Ident
+    second: Ident
     span: Span
 
 
 @dataclass(frozen=True)
 class Constraint:
-    name: Ident
+    """``constraint no_overlap`` or ``constraint max_objects(n)``."""
+
+    rule: Ident | Call
     span: Span
 
 
@@ -170,7 +246,9 @@ class Setting:
 
 @dataclass(frozen=True)
 class Likelihood:
-    name: Ident
+    """``likelihood NAME`` or ``likelihood NAME(option = value, ...)``."""
+
+    rule: Ident | Call
     span: Span
 
 
@@ -209,7 +287,27 @@ class Inference:
     span: Span
 
 
-Statement = Colours | Let | ClassDef | Constraint | Sensor | Render | Inference
+Statement = (
+    Import
+    | Colours
+    | Let
+    | ClassDef
+    | StaticDef
+    | Ground
+    | Change
+    | Constraint
+    | Sensor
+    | Render
+    | Inference
+)
+
+
+@dataclass(frozen=True)
+class Comment:
+    """A ``# ...`` comment, kept so that ``sppl fmt`` can put it back."""
+
+    text: str
+    span: Span
 
 
 @dataclass(frozen=True)
@@ -217,3 +315,4 @@ class Program:
     statements: tuple[Statement, ...]
     path: str
     source: str
+    comments: tuple[Comment, ...] = ()

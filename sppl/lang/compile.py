@@ -1,21 +1,28 @@
 """Syntax tree to ``Model``: the semantic checks of a model file, then the model itself.
 
-The compiler walks the statements in order, so a name must be defined before it is used, and
-reports every error it finds rather than stopping at the first: a file's errors are raised
-together as one ``ModelErrors``, sorted by position. Nothing here knows any concrete class:
-an object class is whatever its declarations say, and its geometry is compiled to a function
-from parameter values to posed parts.
+The compiler walks the statements in order, so a top-level name (a constant, a colour, a
+palette, an imported name) must be defined before it is used; inside a class, parameters and
+derived quantities may come in any order, as long as none depends on itself. It reports every
+error it finds rather than stopping at the first: a file's errors are raised together as one
+``ModelErrors``, sorted by position. Nothing here knows any concrete class: an object class is
+whatever its declarations say, and its geometry is compiled to a function from parameter
+values to posed parts.
 """
 
 from __future__ import annotations
 
+import math
+import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
-from ..domains import Real
-from ..errors import ModelError, ModelErrors, Span
-from ..geometry import Part, rotation_z, scaling, translation
+import numpy as np
+
+from ..domains import Finite, Real
+from ..errors import ModelError, ModelErrors, Span, SpplError
+from ..geometry import MESH_PREFIX, ROUND_SECTIONS, Part, load_mesh, rotation_z
 from ..model import (
     InferenceSettings,
     Model,
@@ -28,8 +35,12 @@ from ..model import (
 from . import ast
 from .expressions import (
     BUILTINS,
+    CATEGORICAL_PARAMETER,
     COLOUR,
+    COLOUR_PARAMETER,
     CONSTANT,
+    DERIVED,
+    PALETTE,
     RGB,
     Colour,
     Expressions,
@@ -40,6 +51,7 @@ from .expressions import (
     did_you_mean,
     failure_reason,
     known,
+    names_in,
 )
 from .parser import parse
 from .priors import Priors, parameter_kind
@@ -49,38 +61,79 @@ DEFAULT_PATH = "<string>"
 
 def load_model(path: str | Path) -> Model:
     """Read, check and compile a ``.scn`` file; raise ``ModelError`` if anything is wrong."""
+    return compile_model(read_source(path), path)
+
+
+def compile_model(text: str, path: str | Path = DEFAULT_PATH) -> Model:
+    """Check and compile the text of a model file; ``path`` is used in error messages and
+    to find the files it imports and the meshes it loads (relative to its folder)."""
+    loader = _Loader()
+    if str(path) != DEFAULT_PATH:
+        loader.stack.append(Path(path).resolve())  # so that a file importing it is a cycle
+    return _Compiler(parse(text, str(path)), loader).compile()
+
+
+def read_source(path: str | Path) -> str:
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        return Path(path).read_text(encoding="utf-8")
     except OSError as e:
         raise ModelError(f"cannot read the model file: {e.strerror}", path=path) from None
     except UnicodeDecodeError:
         raise ModelError("the model file is not UTF-8 text", path=path) from None
-    return compile_model(text, path)
-
-
-def compile_model(text: str, path: str | Path = DEFAULT_PATH) -> Model:
-    """Check and compile the text of a model file; ``path`` is used in error messages."""
-    return _Compiler(parse(text, str(path))).compile()
 
 
 # ---- what the language knows by name ------------------------------------------------------
 
-# How each primitive's arguments scale its unit shape (see sppl/geometry.py for the shapes).
-_PRIMITIVES: dict[str, tuple[tuple[str, ...], Callable[..., tuple[float, float, float]]]] = {
-    "box": (("width", "depth", "height"), lambda w, d, h: (w, d, h)),
-    "cylinder": (("radius", "height"), lambda r, h: (r, r, h)),
-    "cone": (("radius", "height"), lambda r, h: (r, r, h)),
-    "sphere": (("radius",), lambda r: (r, r, r)),
+# Each primitive's arguments, and the unit shapes it is made of with the matrix that scales
+# each (see sppl/geometry.py for the unit shapes).
+_PRIMITIVES: dict[str, tuple[str, ...]] = {
+    "box": ("width", "depth", "height"),
+    "cylinder": ("radius", "height"),
+    "cone": ("radius", "height"),
+    "sphere": ("radius",),
+    "capsule": ("radius", "length"),
+    "mesh": ("file",),
 }
 
-_CONSTRAINTS = ("no_overlap",)
+
+def _pieces(primitive: str, s: list[float]) -> list[tuple[str, np.ndarray]]:
+    if primitive == "box":
+        return [("box", np.diag([s[0], s[1], s[2], 1.0]))]
+    if primitive in ("cylinder", "cone"):
+        return [(primitive, np.diag([s[0], s[0], s[1], 1.0]))]
+    if primitive == "sphere":
+        return [("sphere", np.diag([s[0], s[0], s[0], 1.0]))]
+    # A capsule: a cylinder of the given length between two half-buried spheres, resting on
+    # the ground like the other shapes (total height length + 2 radius).
+    r, length = s
+    body = np.diag([r, r, length, 1.0])
+    body[2, 3] = r
+    top = np.diag([r, r, r, 1.0])
+    top[2, 3] = length
+    return [("cylinder", body), ("sphere", np.diag([r, r, r, 1.0])), ("sphere", top)]
+
+
+_FOOTPRINTS = {"rectangle": ("width", "depth"), "circle": ("radius",)}
+_CONSTRAINTS = ("no_overlap", "max_objects")
 _SENSOR_KINDS = ("image", "depth")
 _RENDER_KEYS = ("background", "ambient", "light")
 _INFERENCE_KEYS = ("p_jump", "data_birth", "data_birth_spread")
-_JUMPS = ("birth", "death", "change")
+_JUMPS = tuple(InferenceSettings().jump_weights)
+_CLASS_SETTINGS = ("count", "max_count")
+# Which modifiers each construct takes.
+_MODIFIERS = {
+    "geometry": ("at", "rotate", "scale", "colour"),
+    "pose": ("at", "rotate", "scale"),
+    "footprint": ("at", "rotate", "scale"),
+    "ground": ("colour", "size"),
+}
+_GROUND_SIZE = 20.0  # metres on a side
+_GROUND_THICKNESS = 0.01
+
+Matrix = np.ndarray | Callable[[Values], np.ndarray]
 
 
-# ---- the compiler -------------------------------------------------------------------------
+# ---- what is compiled ---------------------------------------------------------------------
 
 
 @dataclass
@@ -92,12 +145,21 @@ class _Owner:
     declared: set[str] = field(default_factory=set)  # parameter names, compiled or not
 
 
-@dataclass
+@dataclass(eq=False)
 class _PendingClass(_Owner):
     rate: float | None = None
-    parts: list[tuple[Span, Callable[[Values], Part]]] = field(default_factory=list)
-    span: Span | None = None  # of the class's first definition
+    count: int | None = None
+    max_count: int | None = None
+    parts: list[tuple[Span, Callable[[Values], tuple[Part, ...]]]] = field(default_factory=list)
+    span: Span | None = None  # of the class's definition
+    program: ast.Program | None = None  # the file it is defined in
     position: tuple[str, str] | None = None
+    footprint: Callable[[Values], np.ndarray] | None = None
+    floating: bool = False
+    # Declared change correspondences: id(other class) -> (other, {parameter here: there}).
+    pairs: dict[int, tuple[_PendingClass, dict[str, str]]] = field(default_factory=dict)
+    # Where each paired parameter was paired, for repeated pairings.
+    paired_at: dict[tuple[int, str], Span] = field(default_factory=dict)
 
 
 @dataclass
@@ -106,21 +168,54 @@ class _PendingSensor(_Owner):
     options: dict[str, float] = field(default_factory=dict)
 
 
+@dataclass
+class _Module:
+    """What an imported file offers: its classes and its top-level names."""
+
+    path: str
+    classes: dict[str, _PendingClass]
+    symbols: dict[str, Symbol]
+    palette: dict[str, RGB]
+    errors: list[ModelError]
+
+
+class _Loader:
+    """What one compilation shares with the files it imports: the chain of files being
+    imported (to find cycles), the files already compiled, and the meshes already loaded."""
+
+    def __init__(self) -> None:
+        self.stack: list[Path] = []
+        self.modules: dict[Path, _Module] = {}
+        self.meshes: dict[Path, str | None] = {}  # file: why it cannot be used, or None
+
+
+# ---- the compiler -------------------------------------------------------------------------
+
+
 class _Compiler:
-    def __init__(self, program: ast.Program) -> None:
+    def __init__(self, program: ast.Program, loader: _Loader, main: bool = True) -> None:
         self.program = program
+        self.loader = loader
+        self.main = main
         self.errors: list[ModelError] = []
+        self.imported_errors: list[ModelError] = []
         self.expr = Expressions(self.error)
-        self.priors = Priors(self.expr, self.error, program.source)
+        self.priors = Priors(self.expr, self.error, program.path, program.source)
         self.symbols: dict[str, Symbol] = dict(BUILTINS)
         self.palette: dict[str, RGB] = {}
         self.classes: dict[str, _PendingClass] = {}
         self.sensors: dict[str, _PendingSensor] = {}
         self.no_overlap = False
+        self.max_objects: int | None = None
+        self.static_parts: list[Part] = []
+        self.statics: dict[str, Span] = {}
+        self.ground: Span | None = None
         self.render: dict[str, object] = {}
         self.inference: dict[str, object] = {}
         self.jump_weights: dict[str, float] = {}
         self.steps: list[ast.Step] = []
+        self.changes: list[ast.Change] = []
+        self.imported_at: dict[int, Span] = {}  # id(class): the import that brought it
         # Where each setting key was first given, to report a repeated one.
         self.seen: dict[tuple[str, ...], Span] = {}
 
@@ -135,12 +230,17 @@ class _Compiler:
             )
         )
 
-    def compile(self) -> Model:
+    def check(self) -> None:
+        """Compile every statement, collecting errors."""
         self._declare_globals()
         handlers = {
+            ast.Import: lambda node: None,  # done by _declare_globals
             ast.Colours: self._colours,
             ast.Let: self._let,
             ast.ClassDef: self._class,
+            ast.StaticDef: self._static,
+            ast.Ground: self._ground,
+            ast.Change: self.changes.append,
             ast.Constraint: self._constraint,
             ast.Sensor: self._sensor,
             ast.Render: self._render,
@@ -148,24 +248,35 @@ class _Compiler:
         }
         for statement in self.program.statements:
             handlers[type(statement)](statement)
-        if not any(isinstance(s, ast.ClassDef) for s in self.program.statements):
+        if self.main and not self.classes:
             self.error(
                 "the model declares no object classes",
                 Span(1, 1),
                 "add one with `class NAME { ... }`",
             )
         self._apply_steps()
-        if self.errors:
-            raise ModelErrors(self.errors)
+        self._resolve_changes()
+
+    def compile(self) -> Model:
+        self.check()
+        if self.errors or self.imported_errors:
+            raise ModelErrors(self.errors + self.imported_errors)
         return self._model()
 
-    def _model(self) -> Model:
-        classes = tuple(
-            ObjectClass(
-                c.name, c.rate, tuple(c.parameters), _build(c, self.program), position=c.position
-            )
-            for c in self.classes.values()
+    def module(self) -> _Module:
+        exported = {
+            n: s for n, s in self.symbols.items() if n not in BUILTINS and s.kind in _EXPORTED
+        }
+        return _Module(
+            self.program.path,
+            dict(self.classes),
+            exported,
+            dict(self.palette),
+            self.errors + self.imported_errors,
         )
+
+    def _model(self) -> Model:
+        classes = tuple(self._object_class(c) for c in self.classes.values())
         sensors = {
             kind: Sensor(kind, s.likelihood, tuple(s.parameters), dict(s.options))
             for kind, s in self.sensors.items()
@@ -178,31 +289,65 @@ class _Compiler:
             render=RenderSettings(**self.render),
             colours=dict(self.palette),
             no_overlap=self.no_overlap,
+            max_objects=self.max_objects,
+            static_parts=tuple(self.static_parts),
             path=None if path == DEFAULT_PATH else Path(path),
             source=self.program.source,
         )
 
-    def _global_scope(self) -> Scope:
-        return Scope(self.symbols, parameters_allowed=False, where="a model setting")
+    def _object_class(self, c: _PendingClass) -> ObjectClass:
+        correspondences = {
+            other.name: dict(pairs)
+            for other, pairs in c.pairs.values()
+            if self.classes.get(other.name) is other
+        }
+        rate = float(c.count) if c.count is not None else c.rate
+        return ObjectClass(
+            c.name,
+            rate,
+            tuple(c.parameters),
+            _build(c),
+            footprint_fn=c.footprint,
+            position=c.position,
+            count=c.count,
+            max_count=c.max_count,
+            floating=c.floating,
+            correspondences=correspondences,
+        )
 
-    # ---- constants and colours ----
+    def _global_scope(self, where: str = "a model setting") -> Scope:
+        return Scope(self.symbols, parameters_allowed=False, where=where)
+
+    def _folder(self) -> Path:
+        path = self.program.path
+        return Path(".") if path == DEFAULT_PATH else Path(path).parent
+
+    # ---- imports, constants and colours ----
 
     def _declare_globals(self) -> None:
-        """Register every constant and palette colour before compiling any statement.
+        """Register every import, constant, colour and palette before compiling any statement.
 
         Then a name used before its definition can be told apart from one never defined.
         """
         for statement in self.program.statements:
-            if isinstance(statement, ast.Let):
-                self._declare(statement.name, CONSTANT, statement.span)
+            if isinstance(statement, ast.Import):
+                self._import(statement)
+            elif isinstance(statement, ast.Let):
+                self._declare(statement.name, Symbol(statement.name.text, CONSTANT, statement.span))
             elif isinstance(statement, ast.Colours):
                 for definition in statement.definitions:
-                    self._declare(definition.name, COLOUR, definition.span)
+                    symbol = Symbol(definition.name.text, COLOUR, definition.span)
+                    self._declare(definition.name, symbol)
+                if statement.name is not None:
+                    names = tuple(d.name.text for d in statement.definitions)
+                    symbol = Symbol(statement.name.text, PALETTE, statement.span, names)
+                    self._declare(statement.name, symbol)
 
-    def _declare(self, name: ast.Ident, kind: str, span: Span) -> None:
+    def _declare(self, name: ast.Ident, symbol: Symbol) -> bool:
         if not self._check_new_global(name):
-            return
-        self.symbols[name.text] = Symbol(name.text, kind, span)
+            return False
+        self.symbols[name.text] = symbol
+        return True
 
     def _check_new_global(self, name: ast.Ident, suffix: str = "") -> bool:
         """Whether ``name`` may be defined, reporting a clash with a global name if not."""
@@ -212,15 +357,105 @@ class _Compiler:
         if existing.span.line == 0:
             self.error(f"`{name.text}` is built in and cannot be redefined{suffix}", name.span)
         else:
+            how = "imported" if existing.imported else "defined"
             self.error(
-                f"`{name.text}` is already defined on line {existing.span.line}{suffix}", name.span
+                f"`{name.text}` is already {how} on line {existing.span.line}{suffix}", name.span
             )
         return False
 
     def _defines(self, name: ast.Ident, span: Span) -> bool:
         """Whether this statement is the definition registered for ``name`` (not a duplicate)."""
         symbol = self.symbols.get(name.text)
-        return symbol is not None and symbol.span == span
+        return symbol is not None and symbol.span == span and symbol.imported is None
+
+    def _import(self, node: ast.Import) -> None:
+        module = self._load(node)
+        if module is None:
+            return
+        exports: dict[str, Any] = {**module.symbols, **module.classes}
+        if node.names is None:
+            wanted = [(ast.Ident(n, node.path.span), n) for n in exports]
+        else:
+            wanted = []
+            for ident in node.names:
+                if ident.text in exports:
+                    wanted.append((ident, ident.text))
+                    continue
+                self.error(
+                    f"`{node.path.value}` has no class, constant, colour or palette "
+                    f"`{ident.text}`",
+                    ident.span,
+                    did_you_mean(ident.text, exports) or known("names", exports),
+                )
+        for ident, name in wanted:
+            if name in module.classes:
+                if self._add_class(module.classes[name], ident, node.span, imported=True):
+                    # Its colours, for the model's record (the importer's own names win).
+                    for colour, rgb in module.palette.items():
+                        self.palette.setdefault(colour, rgb)
+                continue
+            origin = module.symbols[name].imported or str(Path(module.path).resolve())
+            symbol = replace(module.symbols[name], span=node.span, imported=origin)
+            existing = self.symbols.get(name)
+            if existing is not None and existing.imported == origin:
+                continue  # the same name from the same file, through another import
+            if self._declare(ident, symbol):
+                if symbol.kind == COLOUR and symbol.value is not None:
+                    self.palette[name] = symbol.value
+                if symbol.kind == PALETTE:
+                    for colour in symbol.value:
+                        if colour in module.palette:
+                            self.palette.setdefault(colour, module.palette[colour])
+
+    def _load(self, node: ast.Import) -> _Module | None:
+        """The imported file, compiled (once per compilation), or None after reporting."""
+        text = node.path.value
+        path = Path(os.path.normpath(self._folder() / text))
+        if not path.is_file():
+            self.error(
+                f"cannot find the imported file `{text}`",
+                node.path.span,
+                f"looked for {path}; the path is relative to the importing file",
+            )
+            return None
+        resolved = path.resolve()
+        if resolved in self.loader.stack:
+            start = self.loader.stack.index(resolved)
+            chain = [p.name for p in self.loader.stack[start:]] + [resolved.name]
+            self.error(
+                f"`{text}` is imported in a cycle: {' -> '.join(chain)}",
+                node.path.span,
+                "a file cannot import itself, directly or through other files",
+            )
+            return None
+        module = self.loader.modules.get(resolved)
+        first_time = module is None
+        if module is None:
+            module = self._compile_import(path, resolved)
+            self.loader.modules[resolved] = module
+        if module.errors:
+            n = len(module.errors)
+            self.error(
+                f"the imported file `{text}` has {n} error{'s' if n > 1 else ''}",
+                node.path.span,
+                "listed below",
+            )
+            if first_time:
+                self.imported_errors.extend(module.errors)
+        return module
+
+    def _compile_import(self, path: Path, resolved: Path) -> _Module:
+        try:
+            program = parse(read_source(path), str(path))
+        except ModelError as error:
+            return _Module(str(path), {}, {}, {}, [error])
+        child = _Compiler(program, self.loader, main=False)
+        self.loader.stack.append(resolved)
+        try:
+            child.check()
+        finally:
+            self.loader.stack.pop()
+        return child.module()
 
     def _colours(self, node: ast.Colours) -> None:
         for definition in node.definitions:
@@ -238,37 +473,60 @@ class _Compiler:
 
     # ---- classes ----
 
+    def _add_class(
+        self, pending: _PendingClass, name: ast.Ident, span: Span, imported: bool = False
+    ) -> bool:
+        existing = self.classes.get(name.text)
+        if existing is pending:
+            return False  # the same class, imported twice
+        if existing is not None:
+            if existing.program is not self.program:
+                where = f"imported on line {self._import_line(existing)}"
+            else:
+                where = f"defined on line {existing.span.line}"
+            self.error(f"class `{name.text}` is already {where}", name.span)
+            return False
+        self.classes[name.text] = pending
+        if imported:
+            self.imported_at[id(pending)] = span
+        return True
+
+    def _import_line(self, pending: _PendingClass) -> int:
+        span = self.imported_at.get(id(pending))
+        return span.line if span else 0
+
     def _class(self, node: ast.ClassDef) -> None:
         name = node.name.text
-        pending = _PendingClass(name, span=node.span)
-        if name in self.classes:
+        pending = _PendingClass(name, span=node.span, program=self.program)
+        self._add_class(pending, node.name, node.span)
+        local, own = self._declare_locals(node.body, pending, f"class `{name}`")
+        scope = Scope(local, parameters_allowed=True, where="geometry")
+        self._compile_locals(own, local, pending, parameters_allowed=True)
+        self._counts(node, pending, local)
+
+        poses = [item for item in node.body if isinstance(item, ast.Pose)]
+        for extra in poses[1:]:
+            self.error(f"`pose` is already given on line {poses[0].span.line}", extra.span)
+        pose: Matrix | None = np.eye(4)
+        if poses:
+            pose = self._transform(poses[0].modifiers, "pose", scope)
+        footprints = [item for item in node.body if isinstance(item, ast.Footprint)]
+        for extra in footprints[1:]:
             self.error(
-                f"class `{name}` is already defined on line {self.classes[name].span.line}",
-                node.name.span,
+                f"`footprint` is already given on line {footprints[0].span.line}", extra.span
             )
-        else:
-            self.classes[name] = pending
-        local = self._declare_parameters(node.body, pending, f"class `{name}`")
-        count: ast.Choice | None = None
+        if footprints and pose is not None:
+            pending.footprint = self._footprint(footprints[0], pose, scope)
+        floats = [item for item in node.body if isinstance(item, ast.Floating)]
+        for extra in floats[1:]:
+            self.error(f"`floating` is already given on line {floats[0].span.line}", extra.span)
+        pending.floating = bool(floats)
         for item in node.body:
             if isinstance(item, ast.Geometry):
-                part = self._geometry(item, local)
-                if part is not None:
-                    pending.parts.append((item.span, part))
-            elif item.name.text == "count":
-                if count is not None:
-                    self.error(
-                        f"`count` is already given on line {count.span.line}", item.name.span
-                    )
-                count = item
-                pending.rate = self._count(item, local)
-            else:
-                self._add_parameter(pending, item, local)
+                part = self._geometry(item, scope)
+                if part is not None and pose is not None:
+                    pending.parts.append((item.span, _posed(pose, part)))
         pending.position = _ground_position(node, pending)
-        if count is None:
-            self.error(
-                f"class `{name}` has no count", node.name.span, "add a line `count ~ poisson(rate)`"
-            )
         if not any(isinstance(item, ast.Geometry) for item in node.body):
             self.error(
                 f"class `{name}` has no geometry",
@@ -276,30 +534,162 @@ class _Compiler:
                 "add a line such as `geometry box(1, 1, 1) colour red`",
             )
 
-    def _declare_parameters(self, body, pending: _Owner, owner: str) -> dict[str, Symbol]:
-        """The symbols visible inside a class or sensor: the globals and its parameters."""
+    def _declare_locals(
+        self, body, pending: _Owner, owner: str
+    ) -> tuple[dict[str, Symbol], dict[str, ast.Choice | ast.Let]]:
+        """The symbols visible inside a class or sensor (the globals, its parameters and
+        derived quantities), and the declarations of its own names."""
         local = dict(self.symbols)
-        own: dict[str, Span] = {}
+        own: dict[str, ast.Choice | ast.Let] = {}
         for item in body:
             # `count` is a class's number of objects, not a parameter; a choice with no
             # domain is reported where it is compiled.
-            if not isinstance(item, ast.Choice) or item.domain is None or item.name.text == "count":
+            if isinstance(item, ast.Choice):
+                if item.domain is None or item.name.text == "count":
+                    continue
+                kind = parameter_kind(item.domain)
+                what = "parameter"
+            elif isinstance(item, ast.Let):
+                kind, what = DERIVED, "derived quantity"
+            else:
                 continue
             name = item.name
-            pending.declared.add(name.text)
+            if what == "parameter":
+                pending.declared.add(name.text)
             if name.text in own:
                 self.error(
-                    f"{owner} already has a parameter `{name.text}` (line {own[name.text].line})",
+                    f"{owner} already has a parameter or derived quantity `{name.text}` "
+                    f"(line {own[name.text].span.line})",
                     name.span,
                 )
                 continue
-            if not self._check_new_global(name, "; a parameter needs a name of its own"):
+            if not self._check_new_global(name, f"; a {what} needs a name of its own"):
                 continue
-            own[name.text] = item.span
-            local[name.text] = Symbol(
-                name.text, parameter_kind(item.domain), item.span, self.palette
+            own[name.text] = item
+            value = self.palette if kind == COLOUR_PARAMETER else None
+            local[name.text] = Symbol(name.text, kind, item.span, value, ordered=False)
+        return local, own
+
+    def _compile_locals(
+        self,
+        own: dict[str, ast.Choice | ast.Let],
+        local: dict[str, Symbol],
+        pending: _Owner,
+        parameters_allowed: bool,
+    ) -> None:
+        """Compile a class's (or sensor's) parameters and derived quantities in an order
+        where each comes after what it uses, reporting any that depend on themselves."""
+        deps = {
+            name: list(
+                dict.fromkeys(
+                    n.id
+                    for n in names_in(item.prior if isinstance(item, ast.Choice) else item.value)
+                    if n.id in own and n.id != name
+                )
             )
-        return local
+            if parameters_allowed
+            else []
+            for name, item in own.items()
+        }
+        broken = self._cycles(own, deps)
+        order = _topological(list(own), deps, broken)
+        for name in order:
+            item = own[name]
+            if isinstance(item, ast.Let):
+                scope = Scope(local, parameters_allowed=True, where="a derived quantity")
+                value = self.expr.number(item.value, scope)
+                local[name] = replace(local[name], value=value)
+                continue
+            if item.name.text == "count":
+                continue
+            reads = _parameters_read(name, deps, own)
+            where = "a prior" if parameters_allowed else "a noise prior"
+            scope = Scope(local, parameters_allowed=parameters_allowed, where=where)
+            parameter = self.priors.parameter(item, scope, reads)
+            if parameter is None:
+                continue
+            pending.parameters.append(parameter)
+            if isinstance(parameter.domain, Finite):
+                local[name] = replace(local[name], labels=parameter.domain.values)
+
+    def _cycles(self, own: Mapping[str, Any], deps: Mapping[str, list[str]]) -> set[str]:
+        """Report each cycle of dependencies once; return the names on cycles."""
+        index = {name: i for i, name in enumerate(own)}
+        on_cycle: set[str] = set()
+        for component in _strongly_connected(list(own), deps):
+            if len(component) < 2:
+                continue
+            on_cycle |= component
+            first = min(component, key=index.__getitem__)
+            path = _cycle_path(first, deps, component)
+            self.error(
+                f"`{first}` depends on itself: {' -> '.join(path)}",
+                own[first].name.span,
+                "parameters and derived quantities must not depend on each other in a circle",
+            )
+        return on_cycle
+
+    def _counts(self, node: ast.ClassDef, pending: _PendingClass, local) -> None:
+        count: ast.Choice | ast.Setting | None = None
+        for item in node.body:
+            if isinstance(item, ast.Choice) and item.name.text == "count":
+                if count is not None:
+                    self.error(
+                        f"`count` is already given on line {count.span.line}", item.name.span
+                    )
+                    continue
+                count = item
+                pending.rate = self._count(item, local)
+            elif isinstance(item, ast.Choice) and item.domain is None:
+                self.error(
+                    f"`{item.name.text}` has no domain",
+                    item.name.span,
+                    f"write `{item.name.text} : DOMAIN ~ PRIOR`, e.g. `: real`",
+                )
+            elif isinstance(item, ast.Setting):
+                key = item.key.text
+                if key not in _CLASS_SETTINGS:
+                    self.error(
+                        f"unknown class setting `{key}`",
+                        item.key.span,
+                        did_you_mean(key, _CLASS_SETTINGS) or known("settings", _CLASS_SETTINGS),
+                    )
+                    continue
+                if key == "count" and count is not None:
+                    self.error(
+                        f"`count` is already given on line {count.span.line}", item.key.span
+                    )
+                    continue
+                if key == "max_count" and not self._first(("class", pending.name, key), item):
+                    continue
+                n = self._whole(item.value, f"`{key}`")
+                if key == "count":
+                    count = item
+                    pending.count = n
+                    pending.rate = None if n is None else float(n)
+                else:
+                    pending.max_count = n
+        if count is None:
+            self.error(
+                f"class `{pending.name}` has no count",
+                node.name.span,
+                "add a line `count ~ poisson(rate)`",
+            )
+        elif pending.count is not None and pending.max_count is not None:
+            self.error(
+                "a fixed count needs no `max_count`",
+                next(i.span for i in node.body if isinstance(i, ast.Setting)
+                     and i.key.text == "max_count"),
+            )
+
+    def _whole(self, expr: ast.Value, what: str) -> int | None:
+        value = self.expr.constant(expr, self._global_scope())
+        if value is None:
+            return None
+        if value < 0 or value != int(value):
+            self.error(f"{what} is a whole number of objects, got {value:g}", expr.span)
+            return None
+        return int(value)
 
     def _count(self, choice: ast.Choice, local: Mapping[str, Symbol]) -> float | None:
         call = choice.prior
@@ -314,59 +704,43 @@ class _Compiler:
             self.error(
                 "the count of a class needs a poisson prior",
                 call.span,
-                "write `count ~ poisson(rate)`",
+                "write `count ~ poisson(rate)`, or `count = n` for exactly n objects",
             )
             return None
-        prior = self.priors.prior(call, Scope(local, where="a prior"), colours=False)
+        prior = self.priors.prior(call, Scope(local, where="a count"), colours=False)
         return None if prior is None else prior.rate
-
-    def _add_parameter(
-        self, owner: _Owner, choice: ast.Choice, local: Mapping[str, Symbol]
-    ) -> None:
-        if choice.domain is None:
-            self.error(
-                f"`{choice.name.text}` has no domain",
-                choice.name.span,
-                f"write `{choice.name.text} : DOMAIN ~ PRIOR`, e.g. `: real`",
-            )
-            return
-        parameter = self.priors.parameter(choice, local)
-        # A duplicate or clashing name was reported where it was declared.
-        if parameter is not None and local[parameter.name].span == choice.span:
-            owner.parameters.append(parameter)
 
     # ---- geometry ----
 
     def _geometry(
-        self, node: ast.Geometry, local: Mapping[str, Symbol]
-    ) -> Callable[[Values], Part] | None:
-        """A function from parameter values to the posed part, or None after reporting."""
-        scope = Scope(local, parameters_allowed=True, where="geometry")
-        sizes = self._primitive(node.primitive, scope)
-        modifiers: dict[str, ast.Modifier] = {}
-        for modifier in node.modifiers:
-            if modifier.keyword in modifiers:
-                self.error(f"`{modifier.keyword}` is given twice", modifier.span)
-            else:
-                modifiers[modifier.keyword] = modifier
-        position = self._position(modifiers.get("at"), scope)
-        angle: Numeric | None = 0.0
-        if "rotate" in modifiers:
-            angle = self.expr.number(modifiers["rotate"].value, scope)
+        self, node: ast.Geometry, scope: Scope
+    ) -> Callable[[Values], tuple[Part, ...]] | None:
+        """A function from parameter values to the posed parts, or None after reporting."""
+        pieces = self._shape(node.primitive, scope)
+        transform = self._transform(node.modifiers, "geometry", scope)
+        colour_modifier = _modifier(node.modifiers, "colour")
         colour: Colour | None = None
-        if "colour" in modifiers:
-            colour = self.expr.colour(modifiers["colour"].value, scope)
+        if colour_modifier is not None:
+            colour = self.expr.colour(colour_modifier.value, scope)
         else:
             self.error(
                 "a geometry line needs a colour",
                 node.span,
                 "add `colour NAME` or `colour rgb(r, g, b)`",
             )
-        if sizes is None or position is None or angle is None or colour is None:
+        if pieces is None or transform is None or colour is None:
             return None
-        return _part(node.primitive.func.text, sizes, position, angle, colour)
+        colour_fn = colour if callable(colour) else (lambda values: colour)
 
-    def _primitive(self, call: ast.Call, scope: Scope) -> list[Numeric] | None:
+        def parts(values: Values) -> tuple[Part, ...]:
+            m = _evaluate(transform, values)
+            rgb = tuple(float(c) for c in colour_fn(values))
+            return tuple(Part(name, m @ _evaluate(pm, values), rgb) for name, pm in pieces)
+
+        return parts
+
+    def _shape(self, call: ast.Call, scope: Scope) -> list[tuple[str, Matrix]] | None:
+        """The unit shapes a primitive is made of, each with its scaling matrix."""
         name = call.func.text
         if name not in _PRIMITIVES:
             self.error(
@@ -375,7 +749,7 @@ class _Compiler:
                 did_you_mean(name, _PRIMITIVES) or known("primitives", _PRIMITIVES),
             )
             return None
-        arguments, _ = _PRIMITIVES[name]
+        arguments = _PRIMITIVES[name]
         signature = f"{name}({', '.join(arguments)})"
         bound = self.expr.bind(call, arguments, signature)
         if bound is None:
@@ -383,12 +757,95 @@ class _Compiler:
         if len(bound) != len(arguments):
             self.expr.arity_error(call, signature)
             return None
+        if name == "mesh":
+            mesh = self._mesh(bound["file"])
+            return None if mesh is None else [(mesh, np.eye(4))]
         sizes = [self.expr.number(bound[a], scope) for a in arguments]
-        return None if any(s is None for s in sizes) else sizes
+        if any(s is None for s in sizes):
+            return None
+        for size, a in zip(sizes, arguments, strict=True):
+            if isinstance(size, float) and size <= 0:
+                self.error(f"the {a} of a {name} must be positive, got {size:g}", bound[a].span)
+                return None
+        if all(isinstance(s, float) for s in sizes):
+            return list(_pieces(name, sizes))
+        functions = [as_function(s) for s in sizes]
+        count = len(_pieces(name, [1.0] * len(sizes)))
+        return [
+            (
+                _pieces(name, [1.0] * len(sizes))[i][0],
+                lambda values, i=i: _pieces(name, [f(values) for f in functions])[i][1],
+            )
+            for i in range(count)
+        ]
 
-    def _position(self, modifier: ast.Modifier | None, scope: Scope) -> list[Numeric] | None:
+    def _mesh(self, expr: ast.Expr) -> str | None:
+        """The primitive name of a mesh file (relative to the model file), after checking that
+        it exists and loads; None after reporting."""
+        if not isinstance(expr, ast.String):
+            self.error(
+                'a mesh is read from a file: mesh("file.obj")', expr.span, "the path is in quotes"
+            )
+            return None
+        path = Path(os.path.normpath(self._folder() / expr.value))
+        if not path.is_file():
+            self.error(
+                f"cannot find the mesh file `{expr.value}`",
+                expr.span,
+                f"looked for {path}; the path is relative to the model file",
+            )
+            return None
+        resolved = path.resolve()
+        if resolved not in self.loader.meshes:
+            try:
+                load_mesh(str(resolved))
+                self.loader.meshes[resolved] = None
+            except ValueError as error:
+                self.loader.meshes[resolved] = str(error)
+        problem = self.loader.meshes[resolved]
+        if problem is not None:
+            self.error(
+                f"the mesh file `{expr.value}` cannot be loaded as a triangle mesh",
+                expr.span,
+                "OBJ, PLY, STL, OFF and GLB files are understood",
+            )
+            return None
+        return MESH_PREFIX + str(resolved)
+
+    def _transform(
+        self, modifiers: tuple[ast.Modifier, ...], construct: str, scope: Scope
+    ) -> Matrix | None:
+        """translate @ rotate @ scale from the modifiers, checking which may be given."""
+        allowed = _MODIFIERS[construct]
+        seen: dict[str, ast.Modifier] = {}
+        ok = True
+        for modifier in modifiers:
+            if modifier.keyword in seen:
+                self.error(f"`{modifier.keyword}` is given twice", modifier.span)
+                ok = False
+            elif modifier.keyword not in allowed:
+                listed = ", ".join(f"`{a}`" for a in allowed)
+                self.error(
+                    f"a {construct} takes {listed}, not `{modifier.keyword}`", modifier.span
+                )
+                ok = False
+            else:
+                seen[modifier.keyword] = modifier
+        position = self._position(seen.get("at"), scope)
+        rotation = self._rotation(seen.get("rotate"), scope)
+        scale = self._scale(seen.get("scale"), scope)
+        if not ok or position is None or rotation is None or scale is None:
+            return None
+        parts = [position, rotation, scale]
+        if all(isinstance(p, np.ndarray) for p in parts):
+            return position @ rotation @ scale
+        return lambda values: (
+            _evaluate(position, values) @ _evaluate(rotation, values) @ _evaluate(scale, values)
+        )
+
+    def _position(self, modifier: ast.Modifier | None, scope: Scope) -> Matrix | None:
         if modifier is None:
-            return [0.0, 0.0, 0.0]
+            return np.eye(4)
         items = modifier.value.items
         if len(items) > 3:
             self.error(
@@ -396,20 +853,245 @@ class _Compiler:
             )
             return None
         # Objects rest on the ground unless the model lifts them.
-        position = [self.expr.number(e, scope) for e in items] + [0.0] * (3 - len(items))
-        return None if any(p is None for p in position) else position
+        xyz = [self.expr.number(e, scope) for e in items] + [0.0] * (3 - len(items))
+        if any(p is None for p in xyz):
+            return None
+        if all(isinstance(p, float) for p in xyz):
+            return _translation(xyz)
+        functions = [as_function(p) for p in xyz]
+        return lambda values: _translation([f(values) for f in functions])
 
-    # ---- constraints, sensors, settings ----
+    def _rotation(self, modifier: ast.Modifier | None, scope: Scope) -> Matrix | None:
+        if modifier is None:
+            return np.eye(4)
+        angle = self.expr.number(modifier.value, scope)
+        axis: list[Numeric | None] = [0.0, 0.0, 1.0]
+        if modifier.axis is not None:
+            if len(modifier.axis.items) != 3:
+                n = len(modifier.axis.items)
+                self.error(f"an axis is (x, y, z), got {n} values", modifier.axis.span)
+                return None
+            axis = [self.expr.number(e, scope) for e in modifier.axis.items]
+        if angle is None or any(a is None for a in axis):
+            return None
+        if all(isinstance(a, float) for a in axis) and not any(axis):
+            self.error("the axis of a rotation must not be (0, 0, 0)", modifier.axis.span)
+            return None
+        if isinstance(angle, float) and all(isinstance(a, float) for a in axis):
+            return _rotation(axis, angle)
+        angle_fn = as_function(angle)
+        axis_fns = [as_function(a) for a in axis]
+        return lambda values: _rotation([f(values) for f in axis_fns], angle_fn(values))
+
+    def _scale(self, modifier: ast.Modifier | None, scope: Scope) -> Matrix | None:
+        if modifier is None:
+            return np.eye(4)
+        value = modifier.value
+        items = list(value.items) if isinstance(value, ast.Tuple) else [value]
+        if len(items) not in (1, 3):
+            self.error(
+                f"`scale` takes one factor or (x, y, z) factors, got {len(items)}", value.span
+            )
+            return None
+        factors = [self.expr.number(e, scope) for e in items]
+        if any(f is None for f in factors):
+            return None
+        for f, e in zip(factors, items, strict=True):
+            if isinstance(f, float) and f <= 0:
+                self.error(f"a scale factor must be positive, got {f:g}", e.span)
+                return None
+        if len(factors) == 1:
+            factors = factors * 3
+        if all(isinstance(f, float) for f in factors):
+            return np.diag([*factors, 1.0])
+        functions = [as_function(f) for f in factors]
+        return lambda values: np.diag([*(f(values) for f in functions), 1.0])
+
+    def _footprint(
+        self, node: ast.Footprint, pose: Matrix, scope: Scope
+    ) -> Callable[[Values], np.ndarray] | None:
+        """A declared footprint: the shape's outline, posed by its modifiers and the pose."""
+        call = node.shape
+        name = call.func.text
+        if name not in _FOOTPRINTS:
+            self.error(
+                f"unknown footprint shape `{name}`",
+                call.func.span,
+                did_you_mean(name, _FOOTPRINTS) or known("footprint shapes", _FOOTPRINTS),
+            )
+            return None
+        arguments = _FOOTPRINTS[name]
+        signature = f"{name}({', '.join(arguments)})"
+        bound = self.expr.bind(call, arguments, signature)
+        transform = self._transform(node.modifiers, "footprint", scope)
+        if bound is None or transform is None:
+            return None
+        if len(bound) != len(arguments):
+            self.expr.arity_error(call, signature)
+            return None
+        sizes = [self.expr.number(bound[a], scope) for a in arguments]
+        if any(s is None for s in sizes):
+            return None
+        functions = [as_function(s) for s in sizes]
+
+        def footprint(values: Values) -> np.ndarray:
+            m = _evaluate(pose, values) @ _evaluate(transform, values)
+            outline = _outline(name, [f(values) for f in functions])
+            return (outline @ m.T)[:, :2]
+
+        return footprint
+
+    # ---- static elements ----
+
+    def _static(self, node: ast.StaticDef) -> None:
+        name = node.name.text
+        if name in self.statics:
+            self.error(f"static `{name}` is already defined on line {self.statics[name].line}",
+                       node.name.span)
+        else:
+            self.statics[name] = node.span
+        scope = Scope(self.symbols, where="a static element")
+        poses = [item for item in node.body if isinstance(item, ast.Pose)]
+        for extra in poses[1:]:
+            self.error(f"`pose` is already given on line {poses[0].span.line}", extra.span)
+        pose = self._transform(poses[0].modifiers, "pose", scope) if poses else np.eye(4)
+        geometries = [item for item in node.body if isinstance(item, ast.Geometry)]
+        if not geometries:
+            self.error(f"static `{name}` has no geometry", node.name.span)
+        for item in geometries:
+            parts = self._geometry(item, scope)
+            if parts is None or pose is None:
+                continue
+            try:
+                self.static_parts.extend(_posed(pose, parts)({}))
+            except (ArithmeticError, ValueError) as e:
+                self.error(f"this geometry cannot be evaluated: {failure_reason(e)}", item.span)
+
+    def _ground(self, node: ast.Ground) -> None:
+        if self.ground is not None:
+            self.error(f"the ground is already given on line {self.ground.line}", node.span)
+            return
+        self.ground = node.span
+        scope = self._global_scope("the ground")
+        ok = self._transform(
+            tuple(m for m in node.modifiers if m.keyword not in ("colour", "size")),
+            "ground",
+            scope,
+        )
+        seen: dict[str, ast.Modifier] = {}
+        for modifier in node.modifiers:
+            if modifier.keyword in seen and modifier.keyword in ("colour", "size"):
+                self.error(f"`{modifier.keyword}` is given twice", modifier.span)
+                ok = None
+            seen.setdefault(modifier.keyword, modifier)
+        colour = None
+        if "colour" in seen:
+            colour = self.expr.colour(seen["colour"].value, scope)
+        else:
+            self.error("the ground needs a colour", node.span, "e.g. `ground colour rgb(0.4, 0.4, 0.4)`")
+        size = _GROUND_SIZE
+        if "size" in seen:
+            size = self.expr.constant(seen["size"].value, scope)
+            if size is not None and size <= 0:
+                self.error(f"the size of the ground must be positive, got {size:g}",
+                           seen["size"].value.span)
+                size = None
+        if ok is None or colour is None or size is None:
+            return
+        matrix = np.diag([size, size, _GROUND_THICKNESS, 1.0])
+        matrix[2, 3] = -_GROUND_THICKNESS
+        # The ground is drawn first: objects resting on it hide its top face where they stand.
+        self.static_parts.insert(0, Part("box", matrix, tuple(float(c) for c in colour)))
+
+    # ---- constraints, changes, sensors, settings ----
 
     def _constraint(self, node: ast.Constraint) -> None:
-        if node.name.text not in _CONSTRAINTS:
+        rule = node.rule
+        ident = rule.func if isinstance(rule, ast.Call) else rule
+        name = ident.text
+        if name not in _CONSTRAINTS:
             self.error(
-                f"unknown constraint `{node.name.text}`",
-                node.name.span,
-                did_you_mean(node.name.text, _CONSTRAINTS) or known("constraints", _CONSTRAINTS),
+                f"unknown constraint `{name}`",
+                ident.span,
+                did_you_mean(name, _CONSTRAINTS) or known("constraints", _CONSTRAINTS),
             )
             return
-        self.no_overlap = True
+        if not self._first(("constraint", name), ast.Setting(ident, ident, node.span)):
+            return
+        if name == "no_overlap":
+            if isinstance(rule, ast.Call):
+                self.error("`no_overlap` takes no arguments", rule.span, "write `constraint no_overlap`")
+                return
+            self.no_overlap = True
+            return
+        if not isinstance(rule, ast.Call) or len(rule.args) != 1:
+            self.error(
+                "`max_objects` needs its bound: max_objects(n)",
+                rule.span,
+                "e.g. `constraint max_objects(10)`",
+            )
+            return
+        arg = self.expr.positional(rule)
+        if arg is not None:
+            self.max_objects = self._whole(arg[0], "`max_objects`")
+
+    def _resolve_changes(self) -> None:
+        for node in self.changes:
+            first = self._change_side(node.first_class, node.first)
+            second = self._change_side(node.second_class, node.second)
+            if first is None or second is None:
+                continue
+            (a, p), (b, q) = first, second
+            if a is b:
+                self.error(
+                    "a change of class is between two different classes", node.second_class.span
+                )
+                continue
+            pa, pb = _parameter(a, p.text), _parameter(b, q.text)
+            if pa is None or pb is None:
+                continue  # it failed to compile, which was reported there
+            if pa.domain != pb.domain:
+                self.error(
+                    f"`{a.name}.{p.text}` ({pa.domain.describe()}) and `{b.name}.{q.text}` "
+                    f"({pb.domain.describe()}) have different domains",
+                    node.second.span,
+                    "a change carries a value as it is, so both need the same domain",
+                )
+                continue
+            clash = False
+            for owner, other, mine in ((a, b, p), (b, a, q)):
+                where = owner.paired_at.get((id(other), mine.text))
+                if where is not None:
+                    self.error(
+                        f"`{owner.name}.{mine.text}` is already paired with a parameter of "
+                        f"`{other.name}` on line {where.line}",
+                        mine.span,
+                    )
+                    clash = True
+            if clash:
+                continue
+            for owner, other, mine, theirs in ((a, b, p, q), (b, a, q, p)):
+                owner.paired_at[id(other), mine.text] = node.span
+                owner.pairs.setdefault(id(other), (other, {}))[1][mine.text] = theirs.text
+
+    def _change_side(self, cls: ast.Ident, name: ast.Ident):
+        pending = self.classes.get(cls.text)
+        if pending is None:
+            self.error(
+                f"unknown class `{cls.text}`",
+                cls.span,
+                did_you_mean(cls.text, self.classes) or known("classes", self.classes),
+            )
+            return None
+        if name.text not in pending.declared:
+            self.error(
+                f"class `{cls.text}` has no parameter `{name.text}`",
+                name.span,
+                did_you_mean(name.text, pending.declared)
+                or known("parameters", sorted(pending.declared)),
+            )
+            return None
+        return pending, name
 
     def _sensor(self, node: ast.Sensor) -> None:
         kind = node.kind.text
@@ -424,7 +1106,7 @@ class _Compiler:
             self.error(f"sensor `{kind}` is already defined", node.kind.span)
         elif kind in _SENSOR_KINDS:
             self.sensors[kind] = pending
-        local = self._declare_parameters(node.body, pending, f"sensor `{kind}`")
+        local, own = self._declare_locals(node.body, pending, f"sensor `{kind}`")
         likelihood: ast.Likelihood | None = None
         for item in node.body:
             if isinstance(item, ast.Likelihood):
@@ -432,10 +1114,8 @@ class _Compiler:
                     self.error(
                         f"the likelihood is already given on line {likelihood.span.line}", item.span
                     )
+                    continue
                 likelihood = item
-                # Likelihoods are looked up by name when the sampler starts; third-party ones
-                # register there, so the name cannot be checked here.
-                pending.likelihood = item.name.text
             elif isinstance(item, ast.Setting):
                 if item.key.text in pending.declared:
                     self.error(f"`{item.key.text}` is already a noise parameter", item.key.span)
@@ -445,14 +1125,81 @@ class _Compiler:
                         pending.options[item.key.text] = value
             elif item.name.text == "count":
                 self.error("a sensor has no `count`; counts belong to classes", item.name.span)
-            else:
-                self._add_parameter(pending, item, local)
+            elif item.domain is None:
+                self.error(
+                    f"`{item.name.text}` has no domain",
+                    item.name.span,
+                    f"write `{item.name.text} : DOMAIN ~ PRIOR`, e.g. `: positive`",
+                )
+        self._compile_locals(own, local, pending, parameters_allowed=False)
         if likelihood is None:
             self.error(
                 f"sensor `{kind}` has no likelihood",
                 node.kind.span,
                 "add a line such as `likelihood gaussian`",
             )
+        else:
+            self._likelihood(likelihood, pending, own, kind)
+
+    def _likelihood(
+        self, node: ast.Likelihood, pending: _PendingSensor, own: Mapping[str, Any], kind: str
+    ) -> None:
+        """Look the likelihood up (third-party ones included), take its options, and check
+        that the sensor gives a prior for each of its noise parameters and no others."""
+        from ..likelihoods import available_likelihoods, get_likelihood
+
+        rule = node.rule
+        ident = rule.func if isinstance(rule, ast.Call) else rule
+        name = ident.text
+        pending.likelihood = name
+        if isinstance(rule, ast.Call):
+            for arg in rule.args:
+                if not isinstance(arg, ast.Keyword):
+                    self.error(
+                        "the options of a likelihood are named: NAME(option = value, ...)",
+                        arg.span,
+                    )
+                    return
+                key = arg.name.text
+                if key in pending.options:
+                    self.error(f"the option `{key}` is given twice", arg.name.span)
+                    continue
+                value = self.expr.constant(arg.value, self._global_scope())
+                if value is not None:
+                    pending.options[key] = value
+        try:
+            names = available_likelihoods()
+        except SpplError as error:
+            self.error(error.message, ident.span)
+            return
+        if name not in names:
+            self.error(
+                f"unknown likelihood `{name}`",
+                ident.span,
+                did_you_mean(name, names) or known("likelihoods", names),
+            )
+            return
+        try:
+            likelihood = get_likelihood(name, pending.options)
+        except (SpplError, TypeError) as error:
+            message = error.message if isinstance(error, SpplError) else str(error)
+            self.error(f"the {name} likelihood cannot be made: {message}", node.span)
+            return
+        wanted = tuple(getattr(likelihood, "noise_parameters", ()) or ())
+        for noise in wanted:
+            if noise not in pending.declared:
+                self.error(
+                    f"the {name} likelihood needs a prior for its noise parameter `{noise}`",
+                    node.span,
+                    f"add a line such as `{noise} : positive ~ gamma(2, 0.1)` to sensor `{kind}`",
+                )
+        for declared, item in own.items():
+            if isinstance(item, ast.Choice) and declared not in wanted:
+                self.error(
+                    f"the {name} likelihood has no noise parameter `{declared}`",
+                    item.name.span,
+                    did_you_mean(declared, wanted) or known("noise parameters", wanted),
+                )
 
     def _first(self, key: tuple[str, ...], node: ast.Setting | ast.Step) -> bool:
         """Whether this is the first time a setting is given, reporting a repeat if not."""
@@ -580,7 +1327,7 @@ class _Compiler:
         for owner in [*self.classes.values(), *self.sensors.values()]:
             owner.parameters = [
                 replace(p, proposal_scale=_scale(scales, owner.name, p.name))
-                if p.continuous and _scale(scales, owner.name, p.name) is not None
+                if _steppable(p) and _scale(scales, owner.name, p.name) is not None
                 else p
                 for p in owner.parameters
             ]
@@ -610,15 +1357,23 @@ class _Compiler:
         matches = [p for o in candidates for p in o.parameters if p.name == name]
         if not matches:
             return False  # it failed to compile, which was reported there
-        if not any(p.continuous for p in matches):
+        if not any(_steppable(p) for p in matches):
             self.error(
-                f"`{name}` is categorical; steps are for continuous parameters", step.name.span
+                f"`{name}` is categorical; steps are for numeric parameters", step.name.span
             )
             return False
         return True
 
 
-# ---- building objects -----------------------------------------------------------------------
+# Kinds of top-level names another file may import.
+_EXPORTED = (CONSTANT, COLOUR, PALETTE)
+
+
+# ---- helpers --------------------------------------------------------------------------------
+
+
+def _steppable(p: Parameter) -> bool:
+    return not isinstance(p.domain, Finite)
 
 
 def _scale(scales: Mapping[tuple[str | None, str], float], owner: str, name: str) -> float | None:
@@ -627,56 +1382,204 @@ def _scale(scales: Mapping[tuple[str | None, str], float], owner: str, name: str
     return scales.get((None, name))
 
 
-def _part(
-    primitive: str,
-    sizes: list[Numeric],
-    position: list[Numeric],
-    angle: Numeric,
-    colour: Colour,
-) -> Callable[[Values], Part]:
-    _, scale = _PRIMITIVES[primitive]
-    sizes_fn = [as_function(s) for s in sizes]
-    x, y, z = (as_function(p) for p in position)
-    angle_fn = as_function(angle)
-    colour_fn = colour if callable(colour) else (lambda values: colour)
+def _parameter(pending: _Owner, name: str) -> Parameter | None:
+    return next((p for p in pending.parameters if p.name == name), None)
 
-    def part(values: Values) -> Part:
-        matrix = (
-            translation(x(values), y(values), z(values))
-            @ rotation_z(angle_fn(values))
-            @ scaling(*scale(*(s(values) for s in sizes_fn)))
-        )
-        return Part(primitive, matrix, tuple(float(c) for c in colour_fn(values)))
 
-    return part
+def _modifier(modifiers: tuple[ast.Modifier, ...], keyword: str) -> ast.Modifier | None:
+    return next((m for m in modifiers if m.keyword == keyword), None)
+
+
+def _evaluate(matrix: Matrix, values: Values) -> np.ndarray:
+    return matrix(values) if callable(matrix) else matrix
+
+
+def _posed(
+    pose: Matrix, parts: Callable[[Values], tuple[Part, ...]]
+) -> Callable[[Values], tuple[Part, ...]]:
+    if isinstance(pose, np.ndarray) and np.array_equal(pose, np.eye(4)):
+        return parts
+
+    def posed(values: Values) -> tuple[Part, ...]:
+        m = _evaluate(pose, values)
+        return tuple(Part(p.primitive, m @ p.matrix, p.colour) for p in parts(values))
+
+    return posed
+
+
+def _translation(xyz) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, 3] = xyz
+    return m
+
+
+def _rotation(axis, angle: float) -> np.ndarray:
+    """Counter-clockwise (right-handed) rotation by ``angle`` about ``axis`` (Rodrigues)."""
+    x, y, z = (float(a) for a in axis)
+    if x == 0.0 and y == 0.0 and z > 0.0:
+        return rotation_z(angle)
+    n = math.sqrt(x * x + y * y + z * z)
+    if n == 0.0:
+        raise ValueError("the axis of a rotation is (0, 0, 0)")
+    x, y, z = x / n, y / n, z / n
+    c, s = math.cos(angle), math.sin(angle)
+    C = 1.0 - c
+    m = np.eye(4)
+    m[:3, :3] = (
+        (c + x * x * C, x * y * C - z * s, x * z * C + y * s),
+        (y * x * C + z * s, c + y * y * C, y * z * C - x * s),
+        (z * x * C - y * s, z * y * C + x * s, c + z * z * C),
+    )
+    return m
+
+
+def _outline(shape: str, sizes: list[float]) -> np.ndarray:
+    """A footprint shape's outline in homogeneous coordinates, counter-clockwise."""
+    if shape == "rectangle":
+        w, d = sizes
+        xy = np.array([[-w / 2, -d / 2], [w / 2, -d / 2], [w / 2, d / 2], [-w / 2, d / 2]])
+    else:
+        (r,) = sizes
+        t = np.linspace(0.0, 2.0 * math.pi, ROUND_SECTIONS, endpoint=False)
+        xy = r * np.stack([np.cos(t), np.sin(t)], axis=1)
+    return np.column_stack([xy, np.zeros(len(xy)), np.ones(len(xy))])
+
+
+def _strongly_connected(nodes: list[str], deps: Mapping[str, list[str]]) -> list[set[str]]:
+    """Tarjan's strongly connected components of the dependency graph."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[set[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in deps.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = set()
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.add(w)
+                if w == v:
+                    break
+            found.append(component)
+
+    for v in nodes:
+        if v not in index:
+            visit(v)
+    return found
+
+
+def _cycle_path(start: str, deps: Mapping[str, list[str]], component: set[str]) -> list[str]:
+    """A shortest path start -> ... -> start inside a strongly connected component."""
+    previous: dict[str, str] = {}
+    frontier = [start]
+    while frontier:
+        following = []
+        for v in frontier:
+            for w in deps.get(v, ()):
+                if w not in component:
+                    continue
+                if w == start:
+                    path = [v]
+                    while path[-1] != start:
+                        path.append(previous[path[-1]])
+                    return [*reversed(path), start]
+                if w not in previous:
+                    previous[w] = v
+                    following.append(w)
+        frontier = following
+    return [start, start]
+
+
+def _topological(nodes: list[str], deps: Mapping[str, list[str]], broken: set[str]) -> list[str]:
+    """The nodes not on a cycle, each after those it depends on, otherwise as declared."""
+    placed: set[str] = set()
+    order: list[str] = []
+    remaining = [n for n in nodes if n not in broken]
+    while remaining:
+        for n in remaining:
+            if all(d in placed or d in broken for d in deps.get(n, ())):
+                break
+        else:  # only reachable through a broken node's descendants: keep the written order
+            n = remaining[0]
+        placed.add(n)
+        order.append(n)
+        remaining.remove(n)
+    return order
+
+
+def _parameters_read(
+    name: str, deps: Mapping[str, list[str]], own: Mapping[str, Any]
+) -> tuple[str, ...]:
+    """The parameters a declaration's expression reads, directly or through derived ones."""
+    found: list[str] = []
+    seen: set[str] = set()
+    stack = list(deps.get(name, ()))
+    while stack:
+        d = stack.pop()
+        if d in seen:
+            continue
+        seen.add(d)
+        if isinstance(own[d], ast.Let):
+            stack.extend(deps.get(d, ()))
+        else:
+            found.append(d)
+    return tuple(sorted(found))
 
 
 def _ground_position(node: ast.ClassDef, pending: _PendingClass) -> tuple[str, str] | None:
-    """The two parameters that place the object on the ground, when its first geometry line
-    says ``at (x, y ...)`` with two real-valued parameters of the class: data-driven birth
-    proposals draw these near unexplained observations instead of from their prior."""
-    reals = {p.name for p in pending.parameters if isinstance(p.domain, Real)}
-    for item in node.body:
-        if isinstance(item, ast.Geometry):
-            for m in item.modifiers:
-                if m.keyword == "at" and isinstance(m.value, ast.Tuple):
-                    a, b = m.value.items[:2]
-                    if isinstance(a, ast.Name) and isinstance(b, ast.Name) and a.id != b.id:
-                        if {a.id, b.id} <= reals:
-                            return (a.id, b.id)
-            return None
-    return None
+    """The two parameters that place the object on the ground, when its pose (or, without
+    one, its first geometry line) says ``at (x, y ...)`` with two independent real-valued
+    parameters of the class that no other parameter depends on: data-driven birth proposals
+    draw these near unexplained observations instead of from their prior."""
+    reals = {p.name for p in pending.parameters if isinstance(p.domain, Real) and not p.depends_on}
+    source = next((i for i in node.body if isinstance(i, ast.Pose)), None) or next(
+        (i for i in node.body if isinstance(i, ast.Geometry)), None
+    )
+    if source is None:
+        return None
+    at = _modifier(source.modifiers, "at")
+    if at is None or not isinstance(at.value, ast.Tuple):
+        return None
+    a, b = at.value.items[:2]
+    if not (isinstance(a, ast.Name) and isinstance(b, ast.Name) and a.id != b.id):
+        return None
+    if not {a.id, b.id} <= reals:
+        return None
+    # Births redraw the position after the other parameters: none may depend on it.
+    reads = {p.name: set(p.depends_on) for p in pending.parameters}
+    for p in pending.parameters:
+        seen, stack = set(), list(p.depends_on)
+        while stack:
+            d = stack.pop()
+            if d in (a.id, b.id):
+                return None
+            if d not in seen:
+                seen.add(d)
+                stack.extend(reads.get(d, ()))
+    return (a.id, b.id)
 
 
-def _build(pending: _PendingClass, program: ast.Program) -> Callable[[Values], tuple[Part, ...]]:
+def _build(pending: _PendingClass) -> Callable[[Values], tuple[Part, ...]]:
     parts = tuple(pending.parts)
     name = pending.name
+    program = pending.program
 
     def build(values: Values) -> tuple[Part, ...]:
-        built = []
+        built: list[Part] = []
         for span, part in parts:
             try:
-                built.append(part(values))
+                built.extend(part(values))
             except (ArithmeticError, ValueError) as e:
                 # An expression such as sqrt(x - 1) can fail for some parameter values.
                 raise ModelError(
@@ -689,3 +1592,6 @@ def _build(pending: _PendingClass, program: ast.Program) -> Callable[[Values], t
         return tuple(built)
 
     return build
+
+
+__all__ = ["compile_model", "load_model", "COLOUR", "CATEGORICAL_PARAMETER"]

@@ -28,10 +28,14 @@ Report = Callable[[str, Span, str | None], None]
 # Kinds of symbol. A colour parameter's value is a palette name, a categorical one's any label.
 CONSTANT = "constant"
 COLOUR = "colour"
+PALETTE = "palette"
 PARAMETER = "parameter"
 COLOUR_PARAMETER = "colour parameter"
 CATEGORICAL_PARAMETER = "categorical parameter"
+DERIVED = "derived quantity"
 PARAMETER_KINDS = (PARAMETER, COLOUR_PARAMETER, CATEGORICAL_PARAMETER)
+# Kinds whose value differs from object to object: only some places may use them.
+OBJECT_KINDS = (*PARAMETER_KINDS, DERIVED)
 
 
 @dataclass(frozen=True)
@@ -40,10 +44,18 @@ class Symbol:
 
     name: str
     kind: str
-    span: Span  # the defining statement; line 0 for built-ins
-    # A constant's float, a palette colour's RGB (None for either if its definition failed),
-    # or, for a colour parameter, the palette its values are looked up in.
+    span: Span  # the defining statement (an import for imported names); line 0 for built-ins
+    # A constant's float, a palette colour's RGB, a palette's colour names, a derived
+    # quantity's ``Numeric`` (None for any of these if its definition failed), or, for a
+    # colour parameter, the palette its values are looked up in.
     value: Any = None
+    # Whether a use before the definition is an error: true for top-level names, false for
+    # a class's parameters and derived quantities, which may come in any order.
+    ordered: bool = True
+    # The values a categorical or colour parameter takes, once its prior is compiled.
+    labels: tuple[str, ...] | None = None
+    # The file an imported name comes from.
+    imported: str | None = None
 
 
 BUILTINS = {"pi": Symbol("pi", CONSTANT, Span(0, 0, 0, 0), math.pi)}
@@ -73,12 +85,24 @@ _FUNCTIONS: dict[str, tuple[int, int | None, Callable[..., float]]] = {
     "sin": (1, 1, math.sin),
     "cos": (1, 1, math.cos),
     "tan": (1, 1, math.tan),
+    "asin": (1, 1, math.asin),
+    "acos": (1, 1, math.acos),
+    "atan": (1, 1, math.atan),
+    "atan2": (2, 2, math.atan2),
+    "hypot": (2, None, math.hypot),
     "exp": (1, 1, math.exp),
     "log": (1, 1, math.log),
     "abs": (1, 1, abs),
+    "floor": (1, 1, math.floor),
+    "ceil": (1, 1, math.ceil),
     "min": (2, None, min),
     "max": (2, None, max),
+    "clamp": (3, 3, lambda x, low, high: min(max(x, low), high)),
+    "deg": (1, 1, math.radians),  # degrees to radians: rotate deg(90)
 }
+# Functions of another kind, known by name so that a misuse gets a message of its own.
+SPECIAL_FUNCTIONS = ("select", "rgb", "shade")
+FUNCTION_NAMES = (*_FUNCTIONS, *SPECIAL_FUNCTIONS)
 
 
 def did_you_mean(name: str, candidates: Iterable[str]) -> str | None:
@@ -120,6 +144,9 @@ class Expressions:
             return self._apply(_BINARY[expr.op], [expr.left, expr.right], scope, expr.span)
         if isinstance(expr, ast.Call):
             return self._function(expr, scope)
+        if isinstance(expr, ast.String):
+            self.report("expected a number here, not a file name", expr.span, None)
+            return None
         self.report("expected a number here, not a tuple", expr.span, None)
         return None
 
@@ -134,24 +161,29 @@ class Expressions:
         return None if any(v is None for v in values) else values
 
     def _name_as_number(self, name: ast.Name, scope: Scope) -> Numeric | None:
-        symbol = self.resolve(name, scope, (CONSTANT, PARAMETER))
+        symbol = self.resolve(name, scope, (CONSTANT, PARAMETER, DERIVED))
         if symbol is None:
             return None
-        if symbol.kind == CONSTANT:
+        if symbol.kind in (CONSTANT, DERIVED):
             return symbol.value
         if symbol.kind == PARAMETER:
             key = symbol.name
             return lambda values: float(values[key])
-        self.report(f"`{name.id}` is a {symbol.kind}, not a number", name.span, None)
+        hint = None
+        if symbol.kind in (COLOUR_PARAMETER, CATEGORICAL_PARAMETER):
+            hint = f"turn its values into numbers with `select({name.id}, value: number, ...)`"
+        self.report(f"`{name.id}` is a {symbol.kind}, not a number", name.span, hint)
         return None
 
     def _function(self, call: ast.Call, scope: Scope) -> Numeric | None:
         name = call.func.text
-        if name == "rgb":
-            self.report("rgb(...) is a colour, not a number", call.span, None)
+        if name in ("rgb", "shade"):
+            self.report(f"{name}(...) is a colour, not a number", call.span, None)
             return None
+        if name == "select":
+            return self.select(call, scope, self.number)
         if name not in _FUNCTIONS:
-            hint = did_you_mean(name, _FUNCTIONS)
+            hint = did_you_mean(name, FUNCTION_NAMES)
             self.report(f"unknown function `{name}`", call.func.span, hint)
             return None
         fewest, most, function = _FUNCTIONS[name]
@@ -245,10 +277,73 @@ class Expressions:
         parts = [as_function(v) for v in values]
         return lambda v: float(function(*(p(v) for p in parts)))
 
+    def select(self, call: ast.Call, scope: Scope, compile_branch: Callable) -> Any:
+        """``select(p, a: x, b: y)``: x where the categorical parameter p is a, y where it is b.
+
+        ``compile_branch`` compiles each branch (``number`` or ``colour``); the result is a
+        function of the object's values, or None after reporting.
+        """
+        signature = "select(parameter, value: result, ...)"
+        if not call.args or not isinstance(call.args[0], ast.Name):
+            self.report(
+                f"select's first argument is a categorical or colour parameter: {signature}",
+                call.args[0].span if call.args else call.span,
+                None,
+            )
+            return None
+        first, branches = call.args[0], call.args[1:]
+        symbol = self.resolve(first, scope, (CATEGORICAL_PARAMETER, COLOUR_PARAMETER))
+        if symbol is None:
+            return None
+        if symbol.kind not in (CATEGORICAL_PARAMETER, COLOUR_PARAMETER):
+            self.report(
+                f"select chooses by a categorical or colour parameter, and `{first.id}` is a "
+                f"{symbol.kind}",
+                first.span,
+                None,
+            )
+            return None
+        compiled: dict[str, Callable[[Values], Any]] = {}
+        ok = True
+        for arg in branches:
+            if not isinstance(arg, ast.Labelled):
+                self.report(
+                    f"each choice of select is `value: result`: {signature}", arg.span, None
+                )
+                return None
+            label = arg.label.text
+            if label in compiled:
+                self.report(f"`{label}` is listed twice", arg.label.span, None)
+                ok = False
+                continue
+            if symbol.labels is not None and label not in symbol.labels:
+                hint = did_you_mean(label, symbol.labels) or known("values", symbol.labels)
+                self.report(f"`{first.id}` never takes the value `{label}`", arg.label.span, hint)
+                ok = False
+            value = compile_branch(arg.weight, scope)
+            if value is None:
+                ok = False
+                continue
+            compiled[label] = value if callable(value) else (lambda v, c=value: c)
+        if not ok:
+            return None
+        missing = [v for v in symbol.labels or () if v not in compiled]
+        if missing:
+            self.report(
+                f"select by `{first.id}` needs a result for "
+                + ", ".join(f"`{m}`" for m in missing),
+                call.span,
+                None,
+            )
+            return None
+        key = symbol.name
+        return lambda values: compiled[values[key]](values)
+
     # ---- colours ----
 
     def colour(self, expr: ast.Expr | ast.Tuple, scope: Scope) -> Colour | None:
-        """A palette colour, a colour parameter, ``rgb(r, g, b)`` or ``(r, g, b)``."""
+        """A palette colour, a colour parameter, ``rgb(r, g, b)``, ``(r, g, b)``,
+        ``shade(colour, factor)`` or ``select(p, a: colour, ...)``."""
         if isinstance(expr, ast.Name):
             symbol = self.resolve(expr, scope, (COLOUR, COLOUR_PARAMETER), "colour")
             if symbol is None:
@@ -263,6 +358,10 @@ class Expressions:
         if isinstance(expr, ast.Call) and expr.func.text == "rgb":
             args = self.positional(expr)
             return None if args is None else self._rgb(args, scope, expr.span)
+        if isinstance(expr, ast.Call) and expr.func.text == "select":
+            return self.select(expr, scope, self.colour)
+        if isinstance(expr, ast.Call) and expr.func.text == "shade":
+            return self._shade(expr, scope)
         if isinstance(expr, ast.Tuple):
             return self._rgb(list(expr.items), scope, expr.span)
         self.report(
@@ -271,6 +370,31 @@ class Expressions:
             None,
         )
         return None
+
+    def _shade(self, call: ast.Call, scope: Scope) -> Colour | None:
+        """``shade(colour, factor)``: the colour with each component times the factor, at
+        most 1 (a darker or lighter variant: a material, say)."""
+        args = self.positional(call)
+        if args is None:
+            return None
+        if len(args) != 2:
+            self.arity_error(call, "shade(colour, factor)")
+            return None
+        colour, factor = self.colour(args[0], scope), self.number(args[1], scope)
+        if colour is None or factor is None:
+            return None
+        if isinstance(factor, float) and factor < 0:
+            self.report(f"a shade factor must not be negative, got {factor:g}", args[1].span, None)
+            return None
+
+        def scaled(rgb: RGB, k: float) -> RGB:
+            return tuple(min(max(c * k, 0.0), 1.0) for c in rgb)
+
+        if not callable(colour) and isinstance(factor, float):
+            return scaled(colour, factor)
+        colour_fn = colour if callable(colour) else (lambda values: colour)
+        factor_fn = as_function(factor)
+        return lambda values: scaled(colour_fn(values), factor_fn(values))
 
     def _rgb(self, items: list[ast.Expr], scope: Scope, span: Span) -> Colour | None:
         if len(items) != 3:
@@ -286,7 +410,8 @@ class Expressions:
         if all(isinstance(c, float) for c in channels):
             return tuple(channels)
         parts = [as_function(c) for c in channels]
-        return lambda values: tuple(p(values) for p in parts)
+        # A component computed from parameters is kept inside [0, 1].
+        return lambda values: tuple(min(max(p(values), 0.0), 1.0) for p in parts)
 
     # ---- names ----
 
@@ -302,7 +427,7 @@ class Expressions:
             candidates = [
                 s.name
                 for s in scope.symbols.values()
-                if s.kind in kinds and (scope.parameters_allowed or s.kind not in PARAMETER_KINDS)
+                if s.kind in kinds and (scope.parameters_allowed or s.kind not in OBJECT_KINDS)
             ]
             hint = did_you_mean(name.id, candidates)
             self.report(f"unknown {noun} `{name.id}`", name.span, hint)
@@ -310,26 +435,55 @@ class Expressions:
         use = (name.span.line, name.span.column)
         start = (symbol.span.line, symbol.span.column)
         end = (symbol.span.end_line or symbol.span.line, symbol.span.end_column or 0)
-        if start <= use < end:
+        if start <= use < end and symbol.imported is None:
             self.report(f"`{name.id}` is used in its own definition", name.span, None)
             return None
-        if use < start:
+        if use < start and symbol.ordered:
             self.report(
                 f"`{name.id}` is used before its definition on line {symbol.span.line}",
                 name.span,
                 None,
             )
             return None
-        if symbol.kind in PARAMETER_KINDS and not scope.parameters_allowed:
+        if symbol.kind in OBJECT_KINDS and not scope.parameters_allowed:
+            what = "a parameter" if symbol.kind in PARAMETER_KINDS else f"a {symbol.kind}"
             self.report(
-                f"{scope.where} may use constants only, and `{name.id}` is a parameter",
+                f"{scope.where} may use constants only, and `{name.id}` is {what}",
                 name.span,
                 None,
             )
             return None
-        if symbol.kind in (CONSTANT, COLOUR) and symbol.value is None:
+        if symbol.kind in (CONSTANT, COLOUR, PALETTE, DERIVED) and symbol.value is None:
             return None  # its definition failed and was reported there
         return symbol
+
+
+def names_in(node: Any) -> list[ast.Name]:
+    """The names an expression or call refers to (a categorical's value labels excluded)."""
+    found: list[ast.Name] = []
+
+    def walk(n: Any) -> None:
+        if isinstance(n, ast.Name):
+            found.append(n)
+        elif isinstance(n, ast.BinOp):
+            walk(n.left)
+            walk(n.right)
+        elif isinstance(n, ast.UnaryOp):
+            walk(n.operand)
+        elif isinstance(n, ast.Tuple):
+            for item in n.items:
+                walk(item)
+        elif isinstance(n, ast.Call):
+            for arg in n.args:
+                if isinstance(arg, ast.Keyword):
+                    walk(arg.value)
+                elif isinstance(arg, ast.Labelled):
+                    walk(arg.weight)
+                elif not (n.func.text == "categorical" and isinstance(arg, ast.Name)):
+                    walk(arg)
+
+    walk(node)
+    return found
 
 
 def failure_reason(e: Exception) -> str:

@@ -18,23 +18,126 @@ from ..errors import ModelError, Span
 from . import ast
 
 
+# The comments of the parse in progress, collected by the lexer (lark drops ignored tokens).
+_comments: list[Token] = []
+
+
+def _collect_comment(token: Token) -> Token:
+    _comments.append(token)
+    return token
+
+
 @cache
 def _parser() -> Lark:
     # Built once per process: LALR gives linear-time parsing and the contextual lexer, which is
     # what lets most keywords double as parameter names.
     return Lark.open_from_package(
-        "sppl", "scn.lark", ("lang",), parser="lalr", propagate_positions=True
+        "sppl",
+        "scn.lark",
+        ("lang",),
+        parser="lalr",
+        propagate_positions=True,
+        lexer_callbacks={"COMMENT": _collect_comment},
     )
 
 
 def parse(text: str, path: str = "<string>") -> ast.Program:
     """Parse the text of a model file into its syntax tree; raise ``ModelError`` if malformed."""
+    # Keywords found to be names are capitalised in the text the parser reads (no keyword
+    # starts with a capital), which keeps every position, and get their text back in the AST.
+    names: dict[int, str] = {}
+    working = text
+    while True:
+        _comments.clear()
+        try:
+            tree = _parser().parse(working, on_error=partial(_keyword_as_name, working))
+            break
+        except UnexpectedInput as e:
+            position = _keyword_before(e, working)
+            if position is None:
+                raise _unfinished(e, working, text, str(path)) or _syntax_error(
+                    e, text, str(path)
+                ) from None
+            word = _WORD.match(working, position).group(0)
+            names[position] = word
+            working = working[:position] + word[0].upper() + working[position + 1 :]
+    statements = _ToAst(names).transform(tree).children
+    comments = tuple(
+        ast.Comment(str(t), Span(t.line, t.column, t.end_line, t.end_column)) for t in _comments
+    )
+    return ast.Program(tuple(statements), str(path), text, comments)
+
+
+_WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+_WORD_BEFORE = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\s|#[^\n]*)*$")
+
+
+def _keyword_before(e: UnexpectedInput, text: str) -> int | None:
+    """Where a keyword that should have been a name starts, or None.
+
+    The contextual lexer reads a keyword wherever the parser may take it, so a parameter
+    called `size` right after a geometry line is read as the start of a `size` modifier, and
+    the error only shows at the `:` after it. No keyword is ever followed by `:`, `~` or `=`,
+    so a keyword just before one of these is a name; the file is parsed again reading it so.
+    """
+    if not isinstance(e, UnexpectedToken) or str(e.token) not in (":", "~", "="):
+        return None
+    match = _WORD_BEFORE.search(text, 0, e.token.start_pos)
+    if match is None or not _is_keyword_text(match.group(1)):
+        return None
+    return match.start(1)
+
+
+# Keywords that start a statement: one read as a name just before a syntax error most likely
+# follows a statement left unfinished (`let a = 2 +` on the line before `class`).
+_STATEMENT_KEYWORDS = frozenset(
+    "import from colours colors let class static ground change constraint sensor render "
+    "inference".split()
+)
+
+
+def _unfinished(e: UnexpectedInput, working: str, text: str, path: str) -> ModelError | None:
+    """The error at a statement keyword that the lexer took for a name, or None.
+
+    After an operator the lexer reads any word as a name, so a statement left unfinished
+    only fails at the word after the next statement's keyword; the error belongs at the
+    keyword, with what the parser expected just before it.
+    """
+    if not isinstance(e, UnexpectedToken) or e.token.type == "$END":
+        return None
+    match = _WORD_BEFORE.search(working, 0, e.token.start_pos)
+    if match is None or match.group(1) not in _STATEMENT_KEYWORDS:
+        return None
+    start = match.start(1)
     try:
-        tree = _parser().parse(text, on_error=partial(_keyword_as_name, text))
-    except UnexpectedInput as e:
-        raise _syntax_error(e, text, str(path)) from None
-    statements = _ToAst().transform(tree).children
-    return ast.Program(tuple(statements), str(path), text)
+        _parser().parse(working[:start])
+    except UnexpectedToken as before:
+        if before.token.type != "$END":
+            return None
+        expected = _describe_expected(_expected_terminals(before))
+    except UnexpectedInput:
+        return None
+    else:
+        return None
+    line = working.count("\n", 0, start) + 1
+    column = start - (working.rfind("\n", 0, start) + 1) + 1
+    message = f"unexpected `{match.group(1)}`; expected {expected}"
+    return ModelError(message, path=path, span=Span(line, column), source=text)
+
+
+@cache
+def _keywords() -> frozenset[str]:
+    return frozenset(
+        t.pattern.value
+        for t in _parser().terminals
+        if isinstance(t.pattern, PatternStr) and t.pattern.value.isidentifier()
+    )
+
+
+def _is_keyword_text(word: str) -> bool:
+    return word in _keywords()
 
 
 # What follows a name that starts a declaration or setting: `x : ...`, `x ~ ...`, `x = ...`.
@@ -79,7 +182,12 @@ def _pattern(terminal: str) -> str | None:
 # ---- error messages -------------------------------------------------------------------------
 
 _OPERATORS = {"+", "-", "*", "/", "^", "**"}
-_DESCRIPTIONS = {"NAME": "a name", "NUMBER": "a number", "$END": "the end of the file"}
+_DESCRIPTIONS = {
+    "NAME": "a name",
+    "NUMBER": "a number",
+    "STRING": 'a file name in double quotes ("...")',
+    "$END": "the end of the file",
+}
 _EXPRESSION_STARTS = {"NUMBER", "NAME", "LPAR", "PLUS", "MINUS"}
 
 
@@ -122,9 +230,11 @@ def _describe_expected(terminals: set[str]) -> str:
     if "NUMBER" in terminals:
         # Where a number may start, so may any expression: say that once rather than listing
         # `(`, `-`, a name and a number.
-        terminals = terminals - _EXPRESSION_STARTS
+        terminals = terminals - _EXPRESSION_STARTS - {"STRING"}
         words.append("an expression")
     texts = [_pattern(t) for t in terminals]
+    # The American spellings are accepted everywhere the British ones are: list those only.
+    texts = [p for p in texts if p not in ("color", "colors")]
     symbols = sorted(f"`{p}`" for p in texts if p and p not in _OPERATORS)
     if any(p in _OPERATORS for p in texts):
         symbols.append("an operator")
@@ -139,6 +249,8 @@ def _describe_token(token: Token) -> str:
         return f"name `{token}`"
     if token.type == "NUMBER":
         return f"number `{token}`"
+    if token.type == "STRING":
+        return f"text {token}"
     return f"`{token}`"
 
 
@@ -175,13 +287,20 @@ def _unary(op: str):
 class _ToAst(Transformer):
     """Builds the frozen AST bottom-up; each method is named after the grammar rule it builds."""
 
+    def __init__(self, names: dict[int, str]) -> None:
+        super().__init__()
+        self.names = names  # start offset: text of a keyword read as a name
+
+    def _text(self, token: Token) -> str:
+        return self.names.get(token.start_pos, str(token))
+
     def ident(self, meta, children):
         (token,) = children
-        return ast.Ident(str(token), _token_span(token))
+        return ast.Ident(self._text(token), _token_span(token))
 
     def name(self, meta, children):
         (token,) = children
-        return ast.Name(str(token), _token_span(token))
+        return ast.Name(self._text(token), _token_span(token))
 
     def number(self, meta, children):
         (token,) = children
@@ -189,6 +308,10 @@ class _ToAst(Transformer):
 
     add, sub, mul, div, pow = (_binary(op) for op in "+-*/^")
     neg, pos = _unary("-"), _unary("+")
+
+    def string(self, meta, children):
+        (token,) = children
+        return ast.String(str(token)[1:-1], _token_span(token))
 
     def tuple(self, meta, children):
         return ast.Tuple(tuple(children), _span(meta))
@@ -208,7 +331,15 @@ class _ToAst(Transformer):
         return ast.ColourDef(*children, _span(meta))
 
     def colours(self, meta, children):
-        return ast.Colours(tuple(children), _span(meta))
+        name, *definitions = children
+        return ast.Colours(name, tuple(definitions), _span(meta))
+
+    def import_all(self, meta, children):
+        return ast.Import(children[0], None, _span(meta))
+
+    def import_from(self, meta, children):
+        path, *names = children
+        return ast.Import(path, tuple(names), _span(meta))
 
     def let(self, meta, children):
         return ast.Let(*children, _span(meta))
@@ -220,18 +351,45 @@ class _ToAst(Transformer):
         return ast.Modifier("at", children[0], _span(meta))
 
     def rotate(self, meta, children):
-        return ast.Modifier("rotate", children[0], _span(meta))
+        angle, axis = children
+        return ast.Modifier("rotate", angle, _span(meta), axis)
+
+    def scale(self, meta, children):
+        return ast.Modifier("scale", children[0], _span(meta))
 
     def colour(self, meta, children):
         return ast.Modifier("colour", children[0], _span(meta))
+
+    def size(self, meta, children):
+        return ast.Modifier("size", children[0], _span(meta))
 
     def geometry(self, meta, children):
         primitive, *modifiers = children
         return ast.Geometry(primitive, tuple(modifiers), _span(meta))
 
+    def pose(self, meta, children):
+        return ast.Pose(tuple(children), _span(meta))
+
+    def footprint(self, meta, children):
+        shape, *modifiers = children
+        return ast.Footprint(shape, tuple(modifiers), _span(meta))
+
+    def floating(self, meta, children):
+        return ast.Floating(_span(meta))
+
     def class_def(self, meta, children):
         name, *body = children
         return ast.ClassDef(name, tuple(body), _span(meta))
+
+    def static_def(self, meta, children):
+        name, *body = children
+        return ast.StaticDef(name, tuple(body), _span(meta))
+
+    def ground(self, meta, children):
+        return ast.Ground(tuple(children), _span(meta))
+
+    def change(self, meta, children):
+        return ast.Change(*children, _span(meta))
 
     def constraint(self, meta, children):
         return ast.Constraint(children[0], _span(meta))

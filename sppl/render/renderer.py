@@ -16,7 +16,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import RenderError
-from ..geometry import PRIMITIVES, Part, unit_mesh
+from ..geometry import MESH_PREFIX, PRIMITIVES, Part, unit_mesh
 from ..model import RenderSettings
 from .context import gl_context
 
@@ -147,9 +147,7 @@ class Renderer:
     def _draw(self, part: Part) -> None:
         vao = self._vaos.get(part.primitive)
         if vao is None:
-            raise RenderError(
-                f"unknown primitive {part.primitive!r}; expected one of {', '.join(PRIMITIVES)}"
-            )
+            vao = self._upload(part.primitive)
         linear = np.asarray(part.matrix, dtype=float)[:3, :3]
         try:
             normal_matrix = np.linalg.inv(linear).T
@@ -159,6 +157,23 @@ class Renderer:
         self._normal_matrix.write(_column_major(normal_matrix))
         self._colour.value = tuple(float(c) for c in part.colour)
         vao.render(moderngl.TRIANGLES)
+
+    def _upload(self, primitive: str) -> moderngl.VertexArray:
+        """Upload a mesh the first time a part uses it (meshes loaded from files)."""
+        if not primitive.startswith(MESH_PREFIX):
+            raise RenderError(
+                f"unknown primitive {primitive!r}; expected one of {', '.join(PRIMITIVES)}"
+            )
+        try:
+            vertices = flat_vertices(primitive)
+        except ValueError as error:
+            raise RenderError(f"cannot load the mesh {primitive[len(MESH_PREFIX):]}: {error}")
+        buffer = self.ctx.buffer(vertices.tobytes())
+        self._buffers[primitive] = buffer
+        self._vaos[primitive] = self.ctx.vertex_array(
+            self.program, [(buffer, "3f 3f", "in_position", "in_normal")]
+        )
+        return self._vaos[primitive]
 
     def _target(self, width: int, height: int) -> _Target:
         key = (int(width), int(height))
