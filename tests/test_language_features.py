@@ -233,7 +233,8 @@ def test_palettes_select_and_shade():
             c : colour ~ categorical(warm, blue)
             m : categorical ~ categorical(matte, shiny)
             size : categorical ~ categorical(small, large)
-            geometry box(1, 1, select(size, small: 0.5, large: 1)) colour shade(c, select(m, matte: 0.5, shiny: 2))
+            let height = select(size, small: 0.5, large: 1)
+            geometry box(1, 1, height) colour shade(c, select(m, matte: 0.5, shiny: 2))
         }
         """
     )
@@ -271,7 +272,8 @@ def test_pose_scale_and_rotation_about_any_axis():
             count ~ poisson(1)
             x : real ~ normal(0, 1)
             pose at (x, 0, 1) rotate pi / 2
-            geometry box(2, 1, 1) at (1, 0) rotate pi / 2 about (1, 0, 0) scale (1, 2, 3) colour rgb(1, 1, 1)
+            geometry box(2, 1, 1) at (1, 0) rotate pi / 2 about (1, 0, 0) scale (1, 2, 3)
+                colour rgb(1, 1, 1)
         }
         """
     ).object_class("thing")
@@ -342,7 +344,7 @@ def test_declared_footprint_and_floating_classes():
     table, balloon = m.classes
     assert sorted(map(tuple, np.round(table.footprint({"x": 1, "y": 0}), 9))) == [
         (0.75, -0.25), (0.75, 0.25), (1.25, -0.25), (1.25, 0.25)
-    ] or len(table.footprint({"x": 1, "y": 0})) == 5
+    ]
     a = make_object(m, table, {"x": 0.0, "y": 0.0})
     b = make_object(m, table, {"x": 0.4, "y": 0.0})  # declared footprints overlap
     c = make_object(m, table, {"x": 0.6, "y": 0.0})  # the tops overlap, the footprints not
@@ -654,10 +656,10 @@ def test_a_third_party_likelihood_registered_by_entry_point(tmp_path, monkeypatc
     )
     assert m.sensors["depth"].likelihood == "laplace"
     assert likelihoods.get_likelihood("laplace", m.sensors["depth"].options).options == {"gain": 2}
-    messages = errors_of(base + "sensor depth {\n likelihood laplce\n b : positive ~ gamma(2, 1)\n}")
-    assert messages == ["unknown likelihood `laplce`"]
+    misspelt = base + "sensor depth {\n likelihood laplce\n b : positive ~ gamma(2, 1)\n}"
+    assert errors_of(misspelt) == ["unknown likelihood `laplce`"]
     with pytest.raises(ModelError) as info_:
-        compile_model(base + "sensor depth {\n likelihood laplce\n b : positive ~ gamma(2, 1)\n}")
+        compile_model(misspelt)
     assert info_.value.hint == "did you mean `laplace`?"
     messages = errors_of(base + "sensor depth {\n likelihood laplace\n}")
     assert messages == ["the laplace likelihood needs a prior for its noise parameter `b`"]

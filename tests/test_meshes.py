@@ -47,7 +47,8 @@ def test_a_mesh_is_uploaded_on_first_use_and_matches_the_ray_caster(gl):
         "c", 40, 30, 60.0, 60.0, 20.0, 15.0, look_at((0.25, -0.25, 0.25), (0.0, 0.0, 0.05))
     )
     matrix = np.diag([1.5, 1.5, 1.5, 1.0])
-    parts = [Part(NAME, matrix, (0.8, 0.2, 0.2)), Part("box", np.diag([0.6, 0.6, 0.01, 1]), (0.5,) * 3)]
+    floor = Part("box", np.diag([0.6, 0.6, 0.01, 1]), (0.5, 0.5, 0.5))
+    parts = [Part(NAME, matrix, (0.8, 0.2, 0.2)), floor]
     renderer = Renderer()
     try:
         assert NAME not in renderer._vaos

@@ -6,13 +6,12 @@ derived quantities may come in any order, as long as none depends on itself. It 
 error it finds rather than stopping at the first: a file's errors are raised together as one
 ``ModelErrors``, sorted by position. Nothing here knows any concrete class: an object class is
 whatever its declarations say, and its geometry is compiled to a function from parameter
-values to posed parts.
+values to posed parts. Imports are in ``imports.py``, geometry and scenery in ``shapes.py``,
+the ordering of a class's declarations in ``order.py``; priors and domains in ``priors.py``.
 """
 
 from __future__ import annotations
 
-import math
-import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -22,7 +21,7 @@ import numpy as np
 
 from ..domains import Finite, Real
 from ..errors import ModelError, ModelErrors, Span, SpplError
-from ..geometry import MESH_PREFIX, ROUND_SECTIONS, Part, load_mesh, rotation_z
+from ..geometry import Part
 from ..model import (
     InferenceSettings,
     Model,
@@ -42,19 +41,19 @@ from .expressions import (
     DERIVED,
     PALETTE,
     RGB,
-    Colour,
     Expressions,
-    Numeric,
     Scope,
     Symbol,
-    as_function,
     did_you_mean,
     failure_reason,
     known,
     names_in,
 )
+from .imports import ImportsMixin, Loader, read_source
+from .order import cycle_path, parameters_read, strongly_connected, topological
 from .parser import parse
 from .priors import Priors, parameter_kind
+from .shapes import Matrix, ShapesMixin, modifier_of, posed
 
 DEFAULT_PATH = "<string>"
 
@@ -67,70 +66,20 @@ def load_model(path: str | Path) -> Model:
 def compile_model(text: str, path: str | Path = DEFAULT_PATH) -> Model:
     """Check and compile the text of a model file; ``path`` is used in error messages and
     to find the files it imports and the meshes it loads (relative to its folder)."""
-    loader = _Loader()
+    loader = Loader()
     if str(path) != DEFAULT_PATH:
         loader.stack.append(Path(path).resolve())  # so that a file importing it is a cycle
     return _Compiler(parse(text, str(path)), loader).compile()
 
 
-def read_source(path: str | Path) -> str:
-    try:
-        return Path(path).read_text(encoding="utf-8")
-    except OSError as e:
-        raise ModelError(f"cannot read the model file: {e.strerror}", path=path) from None
-    except UnicodeDecodeError:
-        raise ModelError("the model file is not UTF-8 text", path=path) from None
-
-
 # ---- what the language knows by name ------------------------------------------------------
 
-# Each primitive's arguments, and the unit shapes it is made of with the matrix that scales
-# each (see sppl/geometry.py for the unit shapes).
-_PRIMITIVES: dict[str, tuple[str, ...]] = {
-    "box": ("width", "depth", "height"),
-    "cylinder": ("radius", "height"),
-    "cone": ("radius", "height"),
-    "sphere": ("radius",),
-    "capsule": ("radius", "length"),
-    "mesh": ("file",),
-}
-
-
-def _pieces(primitive: str, s: list[float]) -> list[tuple[str, np.ndarray]]:
-    if primitive == "box":
-        return [("box", np.diag([s[0], s[1], s[2], 1.0]))]
-    if primitive in ("cylinder", "cone"):
-        return [(primitive, np.diag([s[0], s[0], s[1], 1.0]))]
-    if primitive == "sphere":
-        return [("sphere", np.diag([s[0], s[0], s[0], 1.0]))]
-    # A capsule: a cylinder of the given length between two half-buried spheres, resting on
-    # the ground like the other shapes (total height length + 2 radius).
-    r, length = s
-    body = np.diag([r, r, length, 1.0])
-    body[2, 3] = r
-    top = np.diag([r, r, r, 1.0])
-    top[2, 3] = length
-    return [("cylinder", body), ("sphere", np.diag([r, r, r, 1.0])), ("sphere", top)]
-
-
-_FOOTPRINTS = {"rectangle": ("width", "depth"), "circle": ("radius",)}
 _CONSTRAINTS = ("no_overlap", "max_objects")
 _SENSOR_KINDS = ("image", "depth")
 _RENDER_KEYS = ("background", "ambient", "light")
 _INFERENCE_KEYS = ("p_jump", "data_birth", "data_birth_spread")
 _JUMPS = tuple(InferenceSettings().jump_weights)
 _CLASS_SETTINGS = ("count", "max_count")
-# Which modifiers each construct takes.
-_MODIFIERS = {
-    "geometry": ("at", "rotate", "scale", "colour"),
-    "pose": ("at", "rotate", "scale"),
-    "footprint": ("at", "rotate", "scale"),
-    "ground": ("colour", "size"),
-}
-_GROUND_SIZE = 20.0  # metres on a side
-_GROUND_THICKNESS = 0.01
-
-Matrix = np.ndarray | Callable[[Values], np.ndarray]
 
 
 # ---- what is compiled ---------------------------------------------------------------------
@@ -168,32 +117,11 @@ class _PendingSensor(_Owner):
     options: dict[str, float] = field(default_factory=dict)
 
 
-@dataclass
-class _Module:
-    """What an imported file offers: its classes and its top-level names."""
-
-    path: str
-    classes: dict[str, _PendingClass]
-    symbols: dict[str, Symbol]
-    palette: dict[str, RGB]
-    errors: list[ModelError]
-
-
-class _Loader:
-    """What one compilation shares with the files it imports: the chain of files being
-    imported (to find cycles), the files already compiled, and the meshes already loaded."""
-
-    def __init__(self) -> None:
-        self.stack: list[Path] = []
-        self.modules: dict[Path, _Module] = {}
-        self.meshes: dict[Path, str | None] = {}  # file: why it cannot be used, or None
-
-
 # ---- the compiler -------------------------------------------------------------------------
 
 
-class _Compiler:
-    def __init__(self, program: ast.Program, loader: _Loader, main: bool = True) -> None:
+class _Compiler(ImportsMixin, ShapesMixin):
+    def __init__(self, program: ast.Program, loader: Loader, main: bool = True) -> None:
         self.program = program
         self.loader = loader
         self.main = main
@@ -262,18 +190,6 @@ class _Compiler:
         if self.errors or self.imported_errors:
             raise ModelErrors(self.errors + self.imported_errors)
         return self._model()
-
-    def module(self) -> _Module:
-        exported = {
-            n: s for n, s in self.symbols.items() if n not in BUILTINS and s.kind in _EXPORTED
-        }
-        return _Module(
-            self.program.path,
-            dict(self.classes),
-            exported,
-            dict(self.palette),
-            self.errors + self.imported_errors,
-        )
 
     def _model(self) -> Model:
         classes = tuple(self._object_class(c) for c in self.classes.values())
@@ -368,95 +284,6 @@ class _Compiler:
         symbol = self.symbols.get(name.text)
         return symbol is not None and symbol.span == span and symbol.imported is None
 
-    def _import(self, node: ast.Import) -> None:
-        module = self._load(node)
-        if module is None:
-            return
-        exports: dict[str, Any] = {**module.symbols, **module.classes}
-        if node.names is None:
-            wanted = [(ast.Ident(n, node.path.span), n) for n in exports]
-        else:
-            wanted = []
-            for ident in node.names:
-                if ident.text in exports:
-                    wanted.append((ident, ident.text))
-                    continue
-                self.error(
-                    f"`{node.path.value}` has no class, constant, colour or palette "
-                    f"`{ident.text}`",
-                    ident.span,
-                    did_you_mean(ident.text, exports) or known("names", exports),
-                )
-        for ident, name in wanted:
-            if name in module.classes:
-                if self._add_class(module.classes[name], ident, node.span, imported=True):
-                    # Its colours, for the model's record (the importer's own names win).
-                    for colour, rgb in module.palette.items():
-                        self.palette.setdefault(colour, rgb)
-                continue
-            origin = module.symbols[name].imported or str(Path(module.path).resolve())
-            symbol = replace(module.symbols[name], span=node.span, imported=origin)
-            existing = self.symbols.get(name)
-            if existing is not None and existing.imported == origin:
-                continue  # the same name from the same file, through another import
-            if self._declare(ident, symbol):
-                if symbol.kind == COLOUR and symbol.value is not None:
-                    self.palette[name] = symbol.value
-                if symbol.kind == PALETTE:
-                    for colour in symbol.value:
-                        if colour in module.palette:
-                            self.palette.setdefault(colour, module.palette[colour])
-
-    def _load(self, node: ast.Import) -> _Module | None:
-        """The imported file, compiled (once per compilation), or None after reporting."""
-        text = node.path.value
-        path = Path(os.path.normpath(self._folder() / text))
-        if not path.is_file():
-            self.error(
-                f"cannot find the imported file `{text}`",
-                node.path.span,
-                f"looked for {path}; the path is relative to the importing file",
-            )
-            return None
-        resolved = path.resolve()
-        if resolved in self.loader.stack:
-            start = self.loader.stack.index(resolved)
-            chain = [p.name for p in self.loader.stack[start:]] + [resolved.name]
-            self.error(
-                f"`{text}` is imported in a cycle: {' -> '.join(chain)}",
-                node.path.span,
-                "a file cannot import itself, directly or through other files",
-            )
-            return None
-        module = self.loader.modules.get(resolved)
-        first_time = module is None
-        if module is None:
-            module = self._compile_import(path, resolved)
-            self.loader.modules[resolved] = module
-        if module.errors:
-            n = len(module.errors)
-            self.error(
-                f"the imported file `{text}` has {n} error{'s' if n > 1 else ''}",
-                node.path.span,
-                "listed below",
-            )
-            if first_time:
-                self.imported_errors.extend(module.errors)
-        return module
-
-    def _compile_import(self, path: Path, resolved: Path) -> _Module:
-        try:
-            program = parse(read_source(path), str(path))
-        except ModelError as error:
-            return _Module(str(path), {}, {}, {}, [error])
-        child = _Compiler(program, self.loader, main=False)
-        self.loader.stack.append(resolved)
-        try:
-            child.check()
-        finally:
-            self.loader.stack.pop()
-        return child.module()
-
     def _colours(self, node: ast.Colours) -> None:
         for definition in node.definitions:
             value = self.expr.colour(definition.value, self._global_scope())
@@ -525,7 +352,7 @@ class _Compiler:
             if isinstance(item, ast.Geometry):
                 part = self._geometry(item, scope)
                 if part is not None and pose is not None:
-                    pending.parts.append((item.span, _posed(pose, part)))
+                    pending.parts.append((item.span, posed(pose, part)))
         pending.position = _ground_position(node, pending)
         if not any(isinstance(item, ast.Geometry) for item in node.body):
             self.error(
@@ -592,7 +419,7 @@ class _Compiler:
             for name, item in own.items()
         }
         broken = self._cycles(own, deps)
-        order = _topological(list(own), deps, broken)
+        order = topological(list(own), deps, broken)
         for name in order:
             item = own[name]
             if isinstance(item, ast.Let):
@@ -602,7 +429,7 @@ class _Compiler:
                 continue
             if item.name.text == "count":
                 continue
-            reads = _parameters_read(name, deps, own)
+            reads = parameters_read(name, deps, own)
             where = "a prior" if parameters_allowed else "a noise prior"
             scope = Scope(local, parameters_allowed=parameters_allowed, where=where)
             parameter = self.priors.parameter(item, scope, reads)
@@ -616,12 +443,12 @@ class _Compiler:
         """Report each cycle of dependencies once; return the names on cycles."""
         index = {name: i for i, name in enumerate(own)}
         on_cycle: set[str] = set()
-        for component in _strongly_connected(list(own), deps):
+        for component in strongly_connected(list(own), deps):
             if len(component) < 2:
                 continue
             on_cycle |= component
             first = min(component, key=index.__getitem__)
-            path = _cycle_path(first, deps, component)
+            path = cycle_path(first, deps, component)
             self.error(
                 f"`{first}` depends on itself: {' -> '.join(path)}",
                 own[first].name.span,
@@ -710,299 +537,6 @@ class _Compiler:
         prior = self.priors.prior(call, Scope(local, where="a count"), colours=False)
         return None if prior is None else prior.rate
 
-    # ---- geometry ----
-
-    def _geometry(
-        self, node: ast.Geometry, scope: Scope
-    ) -> Callable[[Values], tuple[Part, ...]] | None:
-        """A function from parameter values to the posed parts, or None after reporting."""
-        pieces = self._shape(node.primitive, scope)
-        transform = self._transform(node.modifiers, "geometry", scope)
-        colour_modifier = _modifier(node.modifiers, "colour")
-        colour: Colour | None = None
-        if colour_modifier is not None:
-            colour = self.expr.colour(colour_modifier.value, scope)
-        else:
-            self.error(
-                "a geometry line needs a colour",
-                node.span,
-                "add `colour NAME` or `colour rgb(r, g, b)`",
-            )
-        if pieces is None or transform is None or colour is None:
-            return None
-        colour_fn = colour if callable(colour) else (lambda values: colour)
-
-        def parts(values: Values) -> tuple[Part, ...]:
-            m = _evaluate(transform, values)
-            rgb = tuple(float(c) for c in colour_fn(values))
-            return tuple(Part(name, m @ _evaluate(pm, values), rgb) for name, pm in pieces)
-
-        return parts
-
-    def _shape(self, call: ast.Call, scope: Scope) -> list[tuple[str, Matrix]] | None:
-        """The unit shapes a primitive is made of, each with its scaling matrix."""
-        name = call.func.text
-        if name not in _PRIMITIVES:
-            self.error(
-                f"unknown primitive `{name}`",
-                call.func.span,
-                did_you_mean(name, _PRIMITIVES) or known("primitives", _PRIMITIVES),
-            )
-            return None
-        arguments = _PRIMITIVES[name]
-        signature = f"{name}({', '.join(arguments)})"
-        bound = self.expr.bind(call, arguments, signature)
-        if bound is None:
-            return None
-        if len(bound) != len(arguments):
-            self.expr.arity_error(call, signature)
-            return None
-        if name == "mesh":
-            mesh = self._mesh(bound["file"])
-            return None if mesh is None else [(mesh, np.eye(4))]
-        sizes = [self.expr.number(bound[a], scope) for a in arguments]
-        if any(s is None for s in sizes):
-            return None
-        for size, a in zip(sizes, arguments, strict=True):
-            if isinstance(size, float) and size <= 0:
-                self.error(f"the {a} of a {name} must be positive, got {size:g}", bound[a].span)
-                return None
-        if all(isinstance(s, float) for s in sizes):
-            return list(_pieces(name, sizes))
-        functions = [as_function(s) for s in sizes]
-        count = len(_pieces(name, [1.0] * len(sizes)))
-        return [
-            (
-                _pieces(name, [1.0] * len(sizes))[i][0],
-                lambda values, i=i: _pieces(name, [f(values) for f in functions])[i][1],
-            )
-            for i in range(count)
-        ]
-
-    def _mesh(self, expr: ast.Expr) -> str | None:
-        """The primitive name of a mesh file (relative to the model file), after checking that
-        it exists and loads; None after reporting."""
-        if not isinstance(expr, ast.String):
-            self.error(
-                'a mesh is read from a file: mesh("file.obj")', expr.span, "the path is in quotes"
-            )
-            return None
-        path = Path(os.path.normpath(self._folder() / expr.value))
-        if not path.is_file():
-            self.error(
-                f"cannot find the mesh file `{expr.value}`",
-                expr.span,
-                f"looked for {path}; the path is relative to the model file",
-            )
-            return None
-        resolved = path.resolve()
-        if resolved not in self.loader.meshes:
-            try:
-                load_mesh(str(resolved))
-                self.loader.meshes[resolved] = None
-            except ValueError as error:
-                self.loader.meshes[resolved] = str(error)
-        problem = self.loader.meshes[resolved]
-        if problem is not None:
-            self.error(
-                f"the mesh file `{expr.value}` cannot be loaded as a triangle mesh",
-                expr.span,
-                "OBJ, PLY, STL, OFF and GLB files are understood",
-            )
-            return None
-        return MESH_PREFIX + str(resolved)
-
-    def _transform(
-        self, modifiers: tuple[ast.Modifier, ...], construct: str, scope: Scope
-    ) -> Matrix | None:
-        """translate @ rotate @ scale from the modifiers, checking which may be given."""
-        allowed = _MODIFIERS[construct]
-        seen: dict[str, ast.Modifier] = {}
-        ok = True
-        for modifier in modifiers:
-            if modifier.keyword in seen:
-                self.error(f"`{modifier.keyword}` is given twice", modifier.span)
-                ok = False
-            elif modifier.keyword not in allowed:
-                listed = ", ".join(f"`{a}`" for a in allowed)
-                self.error(
-                    f"a {construct} takes {listed}, not `{modifier.keyword}`", modifier.span
-                )
-                ok = False
-            else:
-                seen[modifier.keyword] = modifier
-        position = self._position(seen.get("at"), scope)
-        rotation = self._rotation(seen.get("rotate"), scope)
-        scale = self._scale(seen.get("scale"), scope)
-        if not ok or position is None or rotation is None or scale is None:
-            return None
-        parts = [position, rotation, scale]
-        if all(isinstance(p, np.ndarray) for p in parts):
-            return position @ rotation @ scale
-        return lambda values: (
-            _evaluate(position, values) @ _evaluate(rotation, values) @ _evaluate(scale, values)
-        )
-
-    def _position(self, modifier: ast.Modifier | None, scope: Scope) -> Matrix | None:
-        if modifier is None:
-            return np.eye(4)
-        items = modifier.value.items
-        if len(items) > 3:
-            self.error(
-                f"`at` takes (x, y) or (x, y, z), got {len(items)} values", modifier.value.span
-            )
-            return None
-        # Objects rest on the ground unless the model lifts them.
-        xyz = [self.expr.number(e, scope) for e in items] + [0.0] * (3 - len(items))
-        if any(p is None for p in xyz):
-            return None
-        if all(isinstance(p, float) for p in xyz):
-            return _translation(xyz)
-        functions = [as_function(p) for p in xyz]
-        return lambda values: _translation([f(values) for f in functions])
-
-    def _rotation(self, modifier: ast.Modifier | None, scope: Scope) -> Matrix | None:
-        if modifier is None:
-            return np.eye(4)
-        angle = self.expr.number(modifier.value, scope)
-        axis: list[Numeric | None] = [0.0, 0.0, 1.0]
-        if modifier.axis is not None:
-            if len(modifier.axis.items) != 3:
-                n = len(modifier.axis.items)
-                self.error(f"an axis is (x, y, z), got {n} values", modifier.axis.span)
-                return None
-            axis = [self.expr.number(e, scope) for e in modifier.axis.items]
-        if angle is None or any(a is None for a in axis):
-            return None
-        if all(isinstance(a, float) for a in axis) and not any(axis):
-            self.error("the axis of a rotation must not be (0, 0, 0)", modifier.axis.span)
-            return None
-        if isinstance(angle, float) and all(isinstance(a, float) for a in axis):
-            return _rotation(axis, angle)
-        angle_fn = as_function(angle)
-        axis_fns = [as_function(a) for a in axis]
-        return lambda values: _rotation([f(values) for f in axis_fns], angle_fn(values))
-
-    def _scale(self, modifier: ast.Modifier | None, scope: Scope) -> Matrix | None:
-        if modifier is None:
-            return np.eye(4)
-        value = modifier.value
-        items = list(value.items) if isinstance(value, ast.Tuple) else [value]
-        if len(items) not in (1, 3):
-            self.error(
-                f"`scale` takes one factor or (x, y, z) factors, got {len(items)}", value.span
-            )
-            return None
-        factors = [self.expr.number(e, scope) for e in items]
-        if any(f is None for f in factors):
-            return None
-        for f, e in zip(factors, items, strict=True):
-            if isinstance(f, float) and f <= 0:
-                self.error(f"a scale factor must be positive, got {f:g}", e.span)
-                return None
-        if len(factors) == 1:
-            factors = factors * 3
-        if all(isinstance(f, float) for f in factors):
-            return np.diag([*factors, 1.0])
-        functions = [as_function(f) for f in factors]
-        return lambda values: np.diag([*(f(values) for f in functions), 1.0])
-
-    def _footprint(
-        self, node: ast.Footprint, pose: Matrix, scope: Scope
-    ) -> Callable[[Values], np.ndarray] | None:
-        """A declared footprint: the shape's outline, posed by its modifiers and the pose."""
-        call = node.shape
-        name = call.func.text
-        if name not in _FOOTPRINTS:
-            self.error(
-                f"unknown footprint shape `{name}`",
-                call.func.span,
-                did_you_mean(name, _FOOTPRINTS) or known("footprint shapes", _FOOTPRINTS),
-            )
-            return None
-        arguments = _FOOTPRINTS[name]
-        signature = f"{name}({', '.join(arguments)})"
-        bound = self.expr.bind(call, arguments, signature)
-        transform = self._transform(node.modifiers, "footprint", scope)
-        if bound is None or transform is None:
-            return None
-        if len(bound) != len(arguments):
-            self.expr.arity_error(call, signature)
-            return None
-        sizes = [self.expr.number(bound[a], scope) for a in arguments]
-        if any(s is None for s in sizes):
-            return None
-        functions = [as_function(s) for s in sizes]
-
-        def footprint(values: Values) -> np.ndarray:
-            m = _evaluate(pose, values) @ _evaluate(transform, values)
-            outline = _outline(name, [f(values) for f in functions])
-            return (outline @ m.T)[:, :2]
-
-        return footprint
-
-    # ---- static elements ----
-
-    def _static(self, node: ast.StaticDef) -> None:
-        name = node.name.text
-        if name in self.statics:
-            self.error(f"static `{name}` is already defined on line {self.statics[name].line}",
-                       node.name.span)
-        else:
-            self.statics[name] = node.span
-        scope = Scope(self.symbols, where="a static element")
-        poses = [item for item in node.body if isinstance(item, ast.Pose)]
-        for extra in poses[1:]:
-            self.error(f"`pose` is already given on line {poses[0].span.line}", extra.span)
-        pose = self._transform(poses[0].modifiers, "pose", scope) if poses else np.eye(4)
-        geometries = [item for item in node.body if isinstance(item, ast.Geometry)]
-        if not geometries:
-            self.error(f"static `{name}` has no geometry", node.name.span)
-        for item in geometries:
-            parts = self._geometry(item, scope)
-            if parts is None or pose is None:
-                continue
-            try:
-                self.static_parts.extend(_posed(pose, parts)({}))
-            except (ArithmeticError, ValueError) as e:
-                self.error(f"this geometry cannot be evaluated: {failure_reason(e)}", item.span)
-
-    def _ground(self, node: ast.Ground) -> None:
-        if self.ground is not None:
-            self.error(f"the ground is already given on line {self.ground.line}", node.span)
-            return
-        self.ground = node.span
-        scope = self._global_scope("the ground")
-        ok = self._transform(
-            tuple(m for m in node.modifiers if m.keyword not in ("colour", "size")),
-            "ground",
-            scope,
-        )
-        seen: dict[str, ast.Modifier] = {}
-        for modifier in node.modifiers:
-            if modifier.keyword in seen and modifier.keyword in ("colour", "size"):
-                self.error(f"`{modifier.keyword}` is given twice", modifier.span)
-                ok = None
-            seen.setdefault(modifier.keyword, modifier)
-        colour = None
-        if "colour" in seen:
-            colour = self.expr.colour(seen["colour"].value, scope)
-        else:
-            self.error("the ground needs a colour", node.span, "e.g. `ground colour rgb(0.4, 0.4, 0.4)`")
-        size = _GROUND_SIZE
-        if "size" in seen:
-            size = self.expr.constant(seen["size"].value, scope)
-            if size is not None and size <= 0:
-                self.error(f"the size of the ground must be positive, got {size:g}",
-                           seen["size"].value.span)
-                size = None
-        if ok is None or colour is None or size is None:
-            return
-        matrix = np.diag([size, size, _GROUND_THICKNESS, 1.0])
-        matrix[2, 3] = -_GROUND_THICKNESS
-        # The ground is drawn first: objects resting on it hide its top face where they stand.
-        self.static_parts.insert(0, Part("box", matrix, tuple(float(c) for c in colour)))
-
     # ---- constraints, changes, sensors, settings ----
 
     def _constraint(self, node: ast.Constraint) -> None:
@@ -1020,7 +554,9 @@ class _Compiler:
             return
         if name == "no_overlap":
             if isinstance(rule, ast.Call):
-                self.error("`no_overlap` takes no arguments", rule.span, "write `constraint no_overlap`")
+                self.error(
+                    "`no_overlap` takes no arguments", rule.span, "write `constraint no_overlap`"
+                )
                 return
             self.no_overlap = True
             return
@@ -1263,7 +799,9 @@ class _Compiler:
                         "with 1 a birth could never land where nothing is unexplained",
                     )
                 elif key == "data_birth_spread" and not value > 0.0:
-                    self.error(f"`data_birth_spread` must be positive, got {value:g}", item.value.span)
+                    self.error(
+                        f"`data_birth_spread` must be positive, got {value:g}", item.value.span
+                    )
                 else:
                     self.inference[key] = value
 
@@ -1365,8 +903,6 @@ class _Compiler:
         return True
 
 
-# Kinds of top-level names another file may import.
-_EXPORTED = (CONSTANT, COLOUR, PALETTE)
 
 
 # ---- helpers --------------------------------------------------------------------------------
@@ -1386,157 +922,6 @@ def _parameter(pending: _Owner, name: str) -> Parameter | None:
     return next((p for p in pending.parameters if p.name == name), None)
 
 
-def _modifier(modifiers: tuple[ast.Modifier, ...], keyword: str) -> ast.Modifier | None:
-    return next((m for m in modifiers if m.keyword == keyword), None)
-
-
-def _evaluate(matrix: Matrix, values: Values) -> np.ndarray:
-    return matrix(values) if callable(matrix) else matrix
-
-
-def _posed(
-    pose: Matrix, parts: Callable[[Values], tuple[Part, ...]]
-) -> Callable[[Values], tuple[Part, ...]]:
-    if isinstance(pose, np.ndarray) and np.array_equal(pose, np.eye(4)):
-        return parts
-
-    def posed(values: Values) -> tuple[Part, ...]:
-        m = _evaluate(pose, values)
-        return tuple(Part(p.primitive, m @ p.matrix, p.colour) for p in parts(values))
-
-    return posed
-
-
-def _translation(xyz) -> np.ndarray:
-    m = np.eye(4)
-    m[:3, 3] = xyz
-    return m
-
-
-def _rotation(axis, angle: float) -> np.ndarray:
-    """Counter-clockwise (right-handed) rotation by ``angle`` about ``axis`` (Rodrigues)."""
-    x, y, z = (float(a) for a in axis)
-    if x == 0.0 and y == 0.0 and z > 0.0:
-        return rotation_z(angle)
-    n = math.sqrt(x * x + y * y + z * z)
-    if n == 0.0:
-        raise ValueError("the axis of a rotation is (0, 0, 0)")
-    x, y, z = x / n, y / n, z / n
-    c, s = math.cos(angle), math.sin(angle)
-    C = 1.0 - c
-    m = np.eye(4)
-    m[:3, :3] = (
-        (c + x * x * C, x * y * C - z * s, x * z * C + y * s),
-        (y * x * C + z * s, c + y * y * C, y * z * C - x * s),
-        (z * x * C - y * s, z * y * C + x * s, c + z * z * C),
-    )
-    return m
-
-
-def _outline(shape: str, sizes: list[float]) -> np.ndarray:
-    """A footprint shape's outline in homogeneous coordinates, counter-clockwise."""
-    if shape == "rectangle":
-        w, d = sizes
-        xy = np.array([[-w / 2, -d / 2], [w / 2, -d / 2], [w / 2, d / 2], [-w / 2, d / 2]])
-    else:
-        (r,) = sizes
-        t = np.linspace(0.0, 2.0 * math.pi, ROUND_SECTIONS, endpoint=False)
-        xy = r * np.stack([np.cos(t), np.sin(t)], axis=1)
-    return np.column_stack([xy, np.zeros(len(xy)), np.ones(len(xy))])
-
-
-def _strongly_connected(nodes: list[str], deps: Mapping[str, list[str]]) -> list[set[str]]:
-    """Tarjan's strongly connected components of the dependency graph."""
-    index: dict[str, int] = {}
-    low: dict[str, int] = {}
-    stack: list[str] = []
-    on_stack: set[str] = set()
-    found: list[set[str]] = []
-
-    def visit(v: str) -> None:
-        index[v] = low[v] = len(index)
-        stack.append(v)
-        on_stack.add(v)
-        for w in deps.get(v, ()):
-            if w not in index:
-                visit(w)
-                low[v] = min(low[v], low[w])
-            elif w in on_stack:
-                low[v] = min(low[v], index[w])
-        if low[v] == index[v]:
-            component = set()
-            while True:
-                w = stack.pop()
-                on_stack.discard(w)
-                component.add(w)
-                if w == v:
-                    break
-            found.append(component)
-
-    for v in nodes:
-        if v not in index:
-            visit(v)
-    return found
-
-
-def _cycle_path(start: str, deps: Mapping[str, list[str]], component: set[str]) -> list[str]:
-    """A shortest path start -> ... -> start inside a strongly connected component."""
-    previous: dict[str, str] = {}
-    frontier = [start]
-    while frontier:
-        following = []
-        for v in frontier:
-            for w in deps.get(v, ()):
-                if w not in component:
-                    continue
-                if w == start:
-                    path = [v]
-                    while path[-1] != start:
-                        path.append(previous[path[-1]])
-                    return [*reversed(path), start]
-                if w not in previous:
-                    previous[w] = v
-                    following.append(w)
-        frontier = following
-    return [start, start]
-
-
-def _topological(nodes: list[str], deps: Mapping[str, list[str]], broken: set[str]) -> list[str]:
-    """The nodes not on a cycle, each after those it depends on, otherwise as declared."""
-    placed: set[str] = set()
-    order: list[str] = []
-    remaining = [n for n in nodes if n not in broken]
-    while remaining:
-        for n in remaining:
-            if all(d in placed or d in broken for d in deps.get(n, ())):
-                break
-        else:  # only reachable through a broken node's descendants: keep the written order
-            n = remaining[0]
-        placed.add(n)
-        order.append(n)
-        remaining.remove(n)
-    return order
-
-
-def _parameters_read(
-    name: str, deps: Mapping[str, list[str]], own: Mapping[str, Any]
-) -> tuple[str, ...]:
-    """The parameters a declaration's expression reads, directly or through derived ones."""
-    found: list[str] = []
-    seen: set[str] = set()
-    stack = list(deps.get(name, ()))
-    while stack:
-        d = stack.pop()
-        if d in seen:
-            continue
-        seen.add(d)
-        if isinstance(own[d], ast.Let):
-            stack.extend(deps.get(d, ()))
-        else:
-            found.append(d)
-    return tuple(sorted(found))
-
-
 def _ground_position(node: ast.ClassDef, pending: _PendingClass) -> tuple[str, str] | None:
     """The two parameters that place the object on the ground, when its pose (or, without
     one, its first geometry line) says ``at (x, y ...)`` with two independent real-valued
@@ -1548,7 +933,7 @@ def _ground_position(node: ast.ClassDef, pending: _PendingClass) -> tuple[str, s
     )
     if source is None:
         return None
-    at = _modifier(source.modifiers, "at")
+    at = modifier_of(source.modifiers, "at")
     if at is None or not isinstance(at.value, ast.Tuple):
         return None
     a, b = at.value.items[:2]

@@ -48,7 +48,6 @@ from .expressions import (
     Expressions,
     Report,
     Scope,
-    Symbol,
     as_function,
     did_you_mean,
     known,
@@ -527,7 +526,8 @@ def _problems(name: str, args: Mapping[str, float]) -> list[tuple[str | None, st
     if spec.discrete:
         for key in ("low", "high"):
             if key in args and args[key] != int(args[key]):
-                found.append((key, f"the {key} of {name} must be a whole number, got {args[key]:g}"))
+                message = f"the {key} of {name} must be a whole number, got {args[key]:g}"
+                found.append((key, message))
     if spec.ordered and all(k in args for k in spec.ordered):
         low, high = (args[k] for k in spec.ordered)
         if not (low < high or (spec.discrete and low == high)):
