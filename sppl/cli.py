@@ -71,6 +71,34 @@ def _parser() -> argparse.ArgumentParser:
                    help="sweeps left out of the posterior summary (default: half)")
     r.add_argument("--force", action="store_true", help="replace --out if it exists")
     r.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    r.add_argument("--chains", type=int, default=1,
+                   help="independent chains, run in parallel processes, each into "
+                   "OUT/chain_<i>/ with its own stream of --seed; OUT/summary.json pools them "
+                   "and gives R-hat (default: 1, written straight into OUT)")
+
+    e = sub.add_parser(
+        "export",
+        help="write a run's samples as an ArviZ-readable posterior file (NetCDF4)",
+    )
+    e.add_argument("run", type=Path, help="the run folder that `sppl sample` wrote")
+    e.add_argument("--out", type=Path, default=None,
+                   help="the file to write (default: RUN/posterior.nc)")
+
+    rep = sub.add_parser(
+        "report",
+        help="write an HTML page of a run: renders, residuals, counts, occupancy map, "
+        "marginals, traces, acceptance rates, R-hat and ESS, and errors against a true scene",
+    )
+    rep.add_argument("run", type=Path, help="the run folder that `sppl sample` wrote")
+    rep.add_argument("--out", type=Path, default=None,
+                     help="folder for index.html and its PNG figures (default: RUN/report)")
+    rep.add_argument("--truth", type=Path, default=None,
+                     help="the true scene (default: scene.json in the observation folder, if any)")
+    rep.add_argument("--no-truth", action="store_true", help="ignore any true scene")
+    rep.add_argument("--model", type=Path, default=None,
+                     help="the model file (default: the one named in RUN/run.json)")
+    rep.add_argument("--obs", type=Path, default=None,
+                     help="the observation folder (default: the one named in RUN/run.json)")
     return p
 
 
@@ -165,24 +193,49 @@ def cmd_simulate(args) -> int:
 def cmd_sample(args) -> int:
     from .lang import load_model
     from .observations import load_observations
-    from .run import run_chain
+    from .posterior import write_posterior
+    from .run import run_chains
     from .samples import format_summary
 
-    if args.steps < 1 or args.thin < 1:
-        raise UsageError("--steps and --thin must be at least 1")
+    if args.steps < 1 or args.thin < 1 or args.chains < 1:
+        raise UsageError("--steps, --thin and --chains must be at least 1")
     model = load_model(args.model)
     obs = load_observations(args.obs)
     _prepare_out(args.out, args.force)
-    result = run_chain(
-        model, obs, args.out, steps=args.steps, seed=args.seed, thin=args.thin, burn=args.burn,
-        progress=False if args.quiet else None,
+    result = run_chains(
+        model, obs, args.out, chains=args.chains, steps=args.steps, seed=args.seed,
+        thin=args.thin, burn=args.burn, progress=False if args.quiet else None,
     )
     print(format_summary(result.summary))
-    print(f"samples: {args.out / 'samples.jsonl'}; summary: {args.out / 'summary.json'}")
+    samples = args.out / ("samples.jsonl" if args.chains == 1 else "chain_*/samples.jsonl")
+    print(f"samples: {samples}; summary: {args.out / 'summary.json'}")
+    try:
+        print(f"posterior (ArviZ): {write_posterior(args.out)}")
+    except SpplError as e:
+        print(f"no posterior file: {e}", file=sys.stderr)
     return 130 if result.summary["interrupted"] else 0
 
 
-COMMANDS = {"check": cmd_check, "fmt": cmd_fmt, "simulate": cmd_simulate, "sample": cmd_sample}
+def cmd_export(args) -> int:
+    from .posterior import write_posterior
+
+    print(f"wrote {write_posterior(args.run, args.out)}")
+    return 0
+
+
+def cmd_report(args) -> int:
+    from .report import write_report
+
+    if args.truth is not None and args.no_truth:
+        raise UsageError("--truth and --no-truth contradict each other")
+    page = write_report(args.run, out=args.out, truth=False if args.no_truth else args.truth,
+                        model_path=args.model, obs_path=args.obs)
+    print(f"wrote {page}")
+    return 0
+
+
+COMMANDS = {"check": cmd_check, "fmt": cmd_fmt, "simulate": cmd_simulate, "sample": cmd_sample,
+            "export": cmd_export, "report": cmd_report}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -56,3 +57,16 @@ def compare_scenes(estimate: Sequence[Obj], truth: Sequence[Obj]) -> SceneErrors
     return SceneErrors(
         len(truth), len(estimate), wrong_class, wrong_cat, tuple(float(cost[r, c]) for r, c in zip(rows, cols))
     )
+
+
+def match_objects(
+    estimate: Sequence[Obj], truth: Sequence[Obj], max_distance: float = math.inf
+) -> list[tuple[int, int, float]]:
+    """Pairs (estimate index, truth index, ground-plane distance) of the optimal assignment by
+    position, as ``compare_scenes`` matches them, leaving out pairs farther apart than
+    ``max_distance`` metres."""
+    if not estimate or not truth:
+        return []
+    cost = np.array([[np.linalg.norm(_xy(e) - _xy(t)) for t in truth] for e in estimate])
+    rows, cols = linear_sum_assignment(cost)
+    return [(int(r), int(c), float(cost[r, c])) for r, c in zip(rows, cols) if cost[r, c] <= max_distance]

@@ -14,6 +14,7 @@ from tqdm import tqdm
 
 from . import __version__
 from .chain import Sampler
+from .errors import SpplError
 from .model import Model
 from .observations import Observations
 from .samples import SampleWriter, format_summary, read_samples, summarise
@@ -37,7 +38,7 @@ def run_chain(
     out: Path,
     *,
     steps: int,
-    seed: int,
+    seed: int | np.random.SeedSequence,
     renderer=None,
     thin: int = 1,
     burn: int | None = None,
@@ -48,13 +49,17 @@ def run_chain(
     """Run one chain for ``steps`` sweeps from an empty scene, streaming samples to
     ``out/samples.jsonl`` and writing ``out/summary.json``. Ctrl-C or SIGTERM stop it early
     with everything drawn so far on disk and summarised. ``callback(step, trace, best,
-    sampler)``, if given, is called after every sweep; returning True stops the run."""
+    sampler)``, if given, is called after every sweep; returning True stops the run.
+    ``seed`` is an integer or, for one of several chains, a ``SeedSequence`` spawned from the
+    run's seed (``run_chains``)."""
     from .render import Renderer, renderer_string
 
     out.mkdir(parents=True, exist_ok=True)
     renderer = renderer or Renderer(model.render)
     scorer = Scorer(model, observations, renderer)
-    rng = np.random.default_rng(np.random.SeedSequence(seed))
+    seed_sequence = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    rng = np.random.default_rng(seed_sequence)
+    seed = _seed_record(seed)
     sampler = Sampler(model, scorer, rng)
     burn = steps // 2 if burn is None else burn
     meta = {
@@ -114,3 +119,185 @@ def run_chain(
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     (out / "summary.txt").write_text(format_summary(summary) + "\n")
     return RunResult(summary, best, trace)
+
+
+def _seed_record(seed: int | np.random.SeedSequence) -> Any:
+    """A seed as run.json records it: the integer, or a spawned sequence's entropy and key."""
+    if isinstance(seed, np.random.SeedSequence):
+        return {"entropy": int(seed.entropy), "spawn_key": [int(k) for k in seed.spawn_key]}
+    return seed
+
+
+# ----------------------------------------------------------------------------------------------
+# Several chains
+
+
+def chain_folder(out: Path, index: int) -> Path:
+    return out / f"chain_{index}"
+
+
+def _chain_worker(source, path, observations, out, steps, seed, thin, burn, index, extra, done,
+                  errors) -> None:
+    """One chain in its own process (and so with its own GL context). SIGINT is left to the
+    parent, which stops the chains with SIGTERM: run_chain then ends as if interrupted."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        from .lang import compile_model
+
+        model = compile_model(source, path) if path else compile_model(source)
+
+        def tick(step, trace, best, sampler):
+            done[index] = step
+            return False
+
+        run_chain(model, observations, Path(out), steps=steps, seed=seed, thin=thin, burn=burn,
+                  progress=False, extra=extra, callback=tick)
+    except SpplError as e:
+        errors.put((index, str(e)))
+        raise SystemExit(1) from None
+    except BaseException:
+        import traceback
+
+        errors.put((index, traceback.format_exc()))
+        raise SystemExit(1) from None
+
+
+def run_chains(
+    model: Model,
+    observations: Observations,
+    out: Path,
+    *,
+    chains: int,
+    steps: int,
+    seed: int,
+    thin: int = 1,
+    burn: int | None = None,
+    progress: bool | None = None,
+) -> RunResult:
+    """Run ``chains`` chains in parallel processes, chain i into ``out/chain_<i>/`` with the
+    i-th stream of ``SeedSequence(seed).spawn(chains)``, then combine them into ``out/``'s
+    ``run.json``, ``summary.json`` and ``summary.txt`` (the MAP over all chains, the
+    posterior over the pooled samples, R-hat and ESS of the label-invariant quantities).
+    One chain is exactly ``run_chain`` into ``out/``. Ctrl-C or SIGTERM stop every chain
+    with what it has drawn on disk, and the combined summary is still written."""
+    import multiprocessing as mp
+
+    if chains == 1:
+        return run_chain(model, observations, out, steps=steps, seed=seed, thin=thin, burn=burn,
+                         progress=progress)
+    out.mkdir(parents=True, exist_ok=True)
+    seeds = np.random.SeedSequence(seed).spawn(chains)
+    meta = {
+        "sppl_version": __version__,
+        "seed": seed,
+        "chains": chains,
+        "steps": steps,
+        "thin": thin,
+        "model": str(model.path) if model.path else None,
+        "observations": str(observations.root),
+        "chain_folders": [chain_folder(out, i).name for i in range(chains)],
+    }
+    (out / "run.json").write_text(json.dumps(meta, indent=2))
+    ctx = mp.get_context("spawn")
+    done = ctx.Array("q", chains)
+    errors = ctx.Queue()
+    procs = [
+        ctx.Process(
+            target=_chain_worker, name=f"sppl-chain-{i}",
+            args=(model.source, str(model.path) if model.path else None, observations,
+                  str(chain_folder(out, i)), steps, seeds[i], thin, burn, i,
+                  {"chain": i, "chains": chains, "master_seed": seed}, done, errors),
+        )
+        for i in range(chains)
+    ]
+
+    def on_term(signum, frame):
+        raise Stop()
+
+    previous = signal.signal(signal.SIGTERM, on_term)
+    interrupted = False
+    t0 = time.monotonic()
+    bar = tqdm(total=steps * chains, disable=None if progress is None else not progress,
+               unit="step", dynamic_ncols=True, leave=False)
+    try:
+        for p in procs:
+            p.start()
+        while any(p.is_alive() for p in procs):
+            time.sleep(0.25)
+            bar.update(sum(done[:]) - bar.n)
+    except (KeyboardInterrupt, Stop):
+        interrupted = True
+        for p in procs:
+            if p.pid is not None and p.is_alive():
+                p.terminate()  # SIGTERM: the chain stops and summarises what it has
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        for p in procs:
+            if p.pid is not None:
+                p.join()
+        bar.close()
+    seconds = time.monotonic() - t0
+    failures = []
+    while True:
+        try:
+            failures.append(errors.get(timeout=0.1))
+        except Exception:
+            break
+    if failures and not interrupted:
+        index, message = sorted(failures)[0]
+        raise SpplError(f"chain {index} failed: {message.strip()}")
+    summary = combine_chains(out, seconds=seconds, interrupted=interrupted)
+    return RunResult(summary, None, None)
+
+
+def combine_chains(out: Path, *, seconds: float | None = None,
+                   interrupted: bool | None = None) -> dict[str, Any]:
+    """Pool the chains of a run folder into its top-level ``summary.json`` and
+    ``summary.txt``: the posterior over every chain's samples after its burn-in, the best MAP
+    of any chain, move counts summed, and R-hat and ESS of the label-invariant quantities."""
+    meta = json.loads((out / "run.json").read_text())
+    folders = [out / name for name in meta["chain_folders"]]
+    summaries, samples, used = [], [], []
+    for i, folder in enumerate(folders):
+        if not (folder / "summary.json").exists():
+            continue  # stopped before it started
+        s = json.loads((folder / "summary.json").read_text())
+        summaries.append(s)
+        used.append(i)
+        samples += read_samples(folder / "samples.jsonl")
+    if not summaries:
+        raise SpplError(f"{out}: no chain wrote a summary")
+    best = max(range(len(summaries)), key=lambda k: summaries[k]["map"]["score"])
+    map_sample = {"chain": used[best], **summaries[best]["map"]}
+    moves: dict[str, dict[str, int]] = {}
+    for s in summaries:
+        for key, c in s["acceptance_by_class"].items():
+            m = moves.setdefault(key, {"proposed": 0, "accepted": 0})
+            m["proposed"] += c["proposed"]
+            m["accepted"] += c["accepted"]
+    summary = summarise(
+        samples,
+        list(summaries[0]["class_counts"]),
+        map_sample,
+        moves,
+        burn=min(s["burn"] for s in summaries),
+        extra={
+            "chains": len(folders),
+            "chains_used": used,
+            "steps_done": min(s["steps_done"] for s in summaries),
+            "chain_steps_done": [s["steps_done"] for s in summaries],
+            "seconds": seconds if seconds is not None else max(s["seconds"] for s in summaries),
+            "interrupted": (any(s["interrupted"] for s in summaries) if interrupted is None
+                            else interrupted or any(s["interrupted"] for s in summaries)),
+            "seed": meta["seed"],
+        },
+    )
+    try:
+        from .posterior import diagnostics, load_run, posterior_arrays
+
+        summary["diagnostics"] = diagnostics(posterior_arrays(load_run(out, summary=summary)))
+    except SpplError as e:  # too few samples for the diagnostics: the summary stands without
+        summary["diagnostics_error"] = str(e)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    (out / "summary.txt").write_text(format_summary(summary) + "\n")
+    return summary

@@ -122,12 +122,16 @@ def format_summary(summary: dict[str, Any]) -> str:
     lines = []
     if summary.get("interrupted"):
         lines.append(f"interrupted after {summary.get('steps_done')} steps; samples so far:")
+    elif summary.get("chains", 1) > 1:
+        lines.append(f"{summary['chains']} chains of {summary.get('steps_done')} steps in "
+                     f"{summary.get('seconds', 0):.1f} s")
     else:
         lines.append(f"{summary.get('steps_done')} steps in {summary.get('seconds', 0):.1f} s")
     lines.append(f"samples used: {summary['samples_used']} (after {summary['burn']} burn-in steps)")
     m = summary.get("map")
     if m:
-        lines.append(f"MAP scene (log joint {m['score']:.1f}, step {m['step']}):")
+        where = f"chain {m['chain']}, step {m['step']}" if "chain" in m else f"step {m['step']}"
+        lines.append(f"MAP scene (log joint {m['score']:.1f}, {where}):")
         for o in m["objects"]:
             params = ", ".join(
                 f"{k}={v:.3f}" if isinstance(v, float) else f"{k}={v}" for k, v in o["params"].items()
@@ -152,4 +156,13 @@ def format_summary(summary: dict[str, Any]) -> str:
     for kind, ps in summary["noise"].items():
         for name, s in ps.items():
             lines.append(f"noise {kind}.{name}: {s['mean']:.4f} ± {s['sd']:.4f}")
+    diag = summary.get("diagnostics")
+    if diag:
+        def fmt(v, spec):
+            return "n/a" if v is None else format(v, spec)
+
+        lines.append("convergence (R-hat, bulk ESS, tail ESS; R-hat needs 2+ chains, aim < 1.01):")
+        for name, d in diag.items():
+            lines.append(f"  {name}: R-hat {fmt(d['rhat'], '.3f')}, "
+                         f"ESS {fmt(d['ess_bulk'], '.0f')} / {fmt(d['ess_tail'], '.0f')}")
     return "\n".join(lines)

@@ -1,0 +1,114 @@
+"""Small building blocks for scripted experiments (the ones in ``examples/``): simulate a
+known scene, sample it, split an observation folder by camera, and score the result against
+the truth.
+
+Each function does what the command of the same name does, from Python, without printing.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .compare import compare_scenes, match_objects
+
+
+def simulate(model_path: str | Path, cameras: str | Path, scene: str | Path, out: str | Path,
+             *, seed: int = 0) -> Path:
+    """``sppl simulate MODEL --cameras CAMERAS --scene SCENE --out OUT --seed SEED --force``."""
+    from .lang import load_model
+    from .observations import load_cameras, write_observations
+    from .render import Renderer
+    from .simulate import load_scene, render_observations, sample_noise, scene_dict
+
+    model = load_model(model_path)
+    rng = np.random.default_rng(np.random.SeedSequence(seed))
+    objects, noise = load_scene(model, scene)
+    noise = noise or sample_noise(model, rng)
+    out = Path(out)
+    if out.exists():
+        shutil.rmtree(out)
+    renderer = Renderer(model.render)
+    try:
+        frames = render_observations(model, objects, noise, load_cameras(cameras), renderer, rng)
+    finally:
+        renderer.release()
+    write_observations(out, frames)
+    (out / "scene.json").write_text(json.dumps(scene_dict(objects, noise), indent=2) + "\n")
+    return out
+
+
+def camera_subset(obs: str | Path, names: Sequence[str], out: str | Path) -> Path:
+    """A copy of an observation folder with only the named cameras (and its scene.json)."""
+    from .observations import load_observations, write_observations
+
+    observations = load_observations(obs)
+    frames = [f for f in observations.frames if f.name in names]
+    missing = set(names) - {f.name for f in frames}
+    if missing:
+        raise ValueError(f"{obs} has no camera {', '.join(sorted(missing))}")
+    out = Path(out)
+    if out.exists():
+        shutil.rmtree(out)
+    write_observations(out, frames)
+    truth = Path(obs) / "scene.json"
+    if truth.exists():
+        shutil.copy(truth, out / "scene.json")
+    return out
+
+
+def sample(model_path: str | Path, obs: str | Path, out: str | Path, *, steps: int,
+           seed: int = 0, chains: int = 1) -> dict[str, Any]:
+    """``sppl sample MODEL --obs OBS --out OUT --steps STEPS --seed SEED --chains N --force``,
+    without a progress bar; returns the run's summary."""
+    from .lang import load_model
+    from .observations import load_observations
+    from .posterior import write_posterior
+    from .run import run_chains
+
+    out = Path(out)
+    if out.exists():
+        shutil.rmtree(out)
+    result = run_chains(load_model(model_path), load_observations(obs), out, chains=chains,
+                        steps=steps, seed=seed, progress=False)
+    write_posterior(out)
+    return result.summary
+
+
+@dataclass(frozen=True)
+class Recovery:
+    """How many true objects a scene estimate recovered: matched (optimal assignment by ground
+    position) within ``tolerance`` metres, with the right class and categories (colours)."""
+
+    found: int
+    n_true: int
+    n_estimated: int
+    wrong_class: int
+    wrong_category: int
+    max_position_error: float
+
+    @property
+    def all_found(self) -> bool:
+        return self.found == self.n_true == self.n_estimated
+
+
+def recovery(estimate: Sequence[dict], truth: Sequence[dict], tolerance: float = 0.15) -> Recovery:
+    errors = compare_scenes(estimate, truth)
+    found = 0
+    for e, t, d in match_objects(estimate, truth, max_distance=tolerance):
+        est, true = estimate[e], truth[t]
+        cats = {k: v for k, v in true["params"].items() if isinstance(v, str)}
+        if est["class"] == true["class"] and all(est["params"].get(k) == v for k, v in cats.items()):
+            found += 1
+    return Recovery(found, errors.n_true, errors.n_estimated, errors.wrong_class,
+                    errors.wrong_category, errors.max_position_error)
+
+
+def load_objects(path: str | Path) -> list[dict[str, Any]]:
+    return json.loads(Path(path).read_text())["objects"]

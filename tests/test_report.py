@@ -1,0 +1,218 @@
+"""Several chains, the posterior file and the HTML report, end to end on a small scene."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from sppl.cli import main
+from sppl.samples import read_samples
+
+CAMERAS = {
+    "w": 32, "h": 32, "fl_x": 36.0, "fl_y": 36.0, "cx": 16.0, "cy": 16.0, "depth_max": 8.0,
+    "frames": [
+        {"name": "rgb", "modalities": ["rgb"],
+         "look_at": {"eye": [3.0, -2.5, 2.4], "target": [0, 0, 0.3], "up": [0, 0, 1]}},
+        {"name": "depth", "modalities": ["depth"],
+         "look_at": {"eye": [-3.0, -2.0, 2.6], "target": [0, 0, 0.3], "up": [0, 0, 1]}},
+    ],
+}
+SCENE = {
+    "objects": [
+        {"class": "cube", "params": {"x": 0.4, "y": -0.3, "a": 0.2, "s": 0.7, "c": "red"}},
+        {"class": "sphere", "params": {"x": -0.6, "y": 0.5, "r": 0.35, "c": "blue"}},
+    ],
+    "noise": {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}},
+}
+STEPS = 200
+
+
+@pytest.fixture(scope="module")
+def model(root):
+    return root / "models" / "shapes.scn"
+
+
+@pytest.fixture(scope="module")
+def obs(tmp_path_factory, model, require_gl):
+    d = tmp_path_factory.mktemp("report_sim")
+    (d / "cameras.json").write_text(json.dumps(CAMERAS))
+    (d / "scene.json").write_text(json.dumps(SCENE))
+    assert main(["simulate", str(model), "--cameras", str(d / "cameras.json"),
+                 "--scene", str(d / "scene.json"), "--out", str(d / "obs"), "--seed", "2"]) == 0
+    return d / "obs"
+
+
+@pytest.fixture(scope="module")
+def two_chains(tmp_path_factory, model, obs):
+    out = tmp_path_factory.mktemp("runs") / "two"
+    assert main(["sample", str(model), "--obs", str(obs), "--steps", str(STEPS), "--chains", "2",
+                 "--seed", "5", "--out", str(out), "-q"]) == 0
+    return out
+
+
+def test_chains_run_into_their_own_folders_with_spawned_seeds(two_chains):
+    meta = json.loads((two_chains / "run.json").read_text())
+    assert meta["chains"] == 2 and meta["seed"] == 5
+    assert not (two_chains / "samples.jsonl").exists()
+    samples = []
+    for i in range(2):
+        chain = two_chains / f"chain_{i}"
+        chain_meta = json.loads((chain / "run.json").read_text())
+        # The i-th stream of SeedSequence(5).spawn(2), recorded so the chain can be rerun alone.
+        assert chain_meta["seed"] == {"entropy": 5, "spawn_key": [i]}
+        assert chain_meta["chain"] == i and chain_meta["master_seed"] == 5
+        s = read_samples(chain / "samples.jsonl")
+        assert [x["step"] for x in s] == list(range(1, STEPS + 1))
+        samples.append(s)
+    assert samples[0] != samples[1]  # independent streams
+
+
+def test_the_top_summary_pools_the_chains(two_chains):
+    summary = json.loads((two_chains / "summary.json").read_text())
+    chains = [json.loads((two_chains / f"chain_{i}" / "summary.json").read_text()) for i in range(2)]
+    assert summary["chains"] == 2
+    assert summary["samples_used"] == sum(c["samples_used"] for c in chains)
+    best = max(range(2), key=lambda i: chains[i]["map"]["score"])
+    assert summary["map"]["chain"] == best
+    assert summary["map"]["score"] == chains[best]["map"]["score"]
+    for key, c in summary["acceptance_by_class"].items():
+        assert c["proposed"] == sum(ch["acceptance_by_class"].get(key, {"proposed": 0})["proposed"]
+                                    for ch in chains)
+    d = summary["diagnostics"]
+    assert {"n_objects", "log joint", "image_sigma", "depth_sigma"} <= set(d)
+    assert all(f"count[{c}]" in d for c in ("cube", "cone", "sphere"))
+    assert d["log joint"]["rhat"] is not None and d["log joint"]["ess_bulk"] > 0
+    assert "R-hat" in (two_chains / "summary.txt").read_text()
+
+
+def test_the_same_seed_gives_the_same_chains(two_chains, model, obs, tmp_path):
+    again = tmp_path / "again"
+    assert main(["sample", str(model), "--obs", str(obs), "--steps", str(STEPS), "--chains", "2",
+                 "--seed", "5", "--out", str(again), "-q"]) == 0
+    for i in range(2):
+        assert (read_samples(again / f"chain_{i}" / "samples.jsonl")
+                == read_samples(two_chains / f"chain_{i}" / "samples.jsonl"))
+
+
+def test_the_posterior_file_pads_objects_into_slots(two_chains, tmp_path, capsys):
+    from sppl.posterior import open_posterior
+
+    out = tmp_path / "exported.nc"
+    assert main(["export", str(two_chains), "--out", str(out)]) == 0
+    assert str(out) in capsys.readouterr().out
+    assert (two_chains / "posterior.nc").exists()  # `sample` wrote one too
+    tree = open_posterior(out)
+    post, stats = tree["posterior"].dataset, tree["sample_stats"].dataset
+    summary = json.loads((two_chains / "summary.json").read_text())
+    assert dict(post.sizes)["chain"] == 2
+    assert dict(post.sizes)["draw"] == STEPS - summary["burn"] + 1
+    assert list(post["class"].values) == ["cube", "cone", "sphere"]
+    exists = post["exists"].values
+    n = post["n_objects"].values
+    assert (exists.sum(axis=-1) == n).all()
+    assert (post["count"].values.sum(axis=-1) == n).all()
+    # Real objects come first in their slots; every empty slot is NaN / "".
+    assert (np.diff(exists.astype(int), axis=-1) <= 0).all()
+    assert np.isnan(post["x"].values[~exists]).all() and np.isfinite(post["x"].values[exists]).all()
+    assert (post["object_class"].values[~exists] == "").all()
+    assert set(np.unique(post["c"].values[exists])) <= {"red", "green", "blue"}
+    # The chain-0 draws are the chain's samples after burn-in, in order.
+    kept = [s for s in read_samples(two_chains / "chain_0" / "samples.jsonl")
+            if s["step"] >= summary["burn"]][-post.sizes["draw"]:]
+    assert np.allclose(stats["lp"].values[0], [s["score"] for s in kept])
+    assert (n[0] == [len(s["objects"]) for s in kept]).all()
+    assert tree.attrs["seed"] == 5 and tree.attrs["chains"] == 2
+
+
+def test_one_chain_keeps_its_layout_and_gets_a_posterior_file(model, obs, tmp_path):
+    from sppl.posterior import diagnostics, load_run, posterior_arrays
+
+    out = tmp_path / "one"
+    assert main(["sample", str(model), "--obs", str(obs), "--steps", "60", "--out", str(out),
+                 "-q"]) == 0
+    assert (out / "samples.jsonl").exists() and not (out / "chain_0").exists()
+    assert (out / "posterior.nc").exists()
+    d = diagnostics(posterior_arrays(load_run(out)))
+    assert d["n_objects"]["rhat"] is None  # R-hat needs two chains
+
+
+def test_export_of_a_folder_that_is_no_run_is_one_clear_error(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "sppl", "export", str(tmp_path)],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 1
+    assert "run.json" in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.fixture(scope="module")
+def report(two_chains):
+    assert main(["report", str(two_chains)]) == 0
+    return two_chains / "report" / "index.html"
+
+
+def test_the_report_has_every_section_and_its_figures(report):
+    page = report.read_text()
+    for heading in ("The cameras", "The posterior over counts", "Occupancy",
+                    "Each MAP object", "Traces", "Acceptance rates", "R-hat",
+                    "The MAP scene against the truth"):
+        assert heading in page, heading
+    images = re.findall(r'<img src="([^"]+)"', page)
+    for name in ("camera_rgb.png", "camera_depth.png", "counts.png", "occupancy.png",
+                 "traces.png", "acceptance.png"):
+        assert name in images
+    assert any(i.startswith("object_0_") for i in images)
+    for i in images:  # every figure is a PNG beside the page
+        assert (report.parent / i).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "<script" not in page and "http" not in page  # nothing to fetch, nothing to run
+
+
+def test_the_report_without_a_truth(two_chains, tmp_path):
+    from sppl.report import write_report
+
+    page = write_report(two_chains, out=tmp_path / "r", truth=False).read_text()
+    assert "against the truth" not in page and "occupancy.png" in page
+
+
+def test_the_report_opens_in_headless_chromium_with_nothing_missing(report):
+    from browser import check_page, find_chromium
+
+    chromium = find_chromium()
+    if chromium is None:
+        if os.environ.get("CI") == "true":
+            pytest.fail("CI must have Chromium (Debian's chromium package) for the report test")
+        pytest.skip("no chromium on this machine (Debian: apt-get install chromium)")
+    result = check_page(report, chromium)
+    assert result.images >= 6
+    assert result.problems == []
+
+
+def test_ctrl_c_stops_every_chain_with_a_summary(model, obs, tmp_path):
+    out = tmp_path / "run"
+    p = subprocess.Popen(
+        [sys.executable, "-m", "sppl", "sample", str(model), "--obs", str(obs), "--chains", "2",
+         "--steps", "1000000", "--out", str(out), "-q"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    files = [out / f"chain_{i}" / "samples.jsonl" for i in range(2)]
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        time.sleep(0.5)
+        if all(f.exists() and f.stat().st_size > 0 for f in files):
+            break
+    time.sleep(1.0)
+    p.send_signal(signal.SIGINT)
+    stdout, stderr = p.communicate(timeout=120)
+    assert p.returncode == 130, stderr
+    assert "interrupted after" in stdout
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] and summary["chains"] == 2
+    for i in range(2):
+        chain = json.loads((out / f"chain_{i}" / "summary.json").read_text())
+        assert chain["interrupted"] and chain["steps_done"] >= len(read_samples(files[i])) > 0
