@@ -69,4 +69,5 @@ def match_objects(
         return []
     cost = np.array([[np.linalg.norm(_xy(e) - _xy(t)) for t in truth] for e in estimate])
     rows, cols = linear_sum_assignment(cost)
-    return [(int(r), int(c), float(cost[r, c])) for r, c in zip(rows, cols) if cost[r, c] <= max_distance]
+    return [(int(r), int(c), float(cost[r, c]))
+            for r, c in zip(rows, cols) if cost[r, c] <= max_distance]

@@ -67,7 +67,8 @@ def _json(path: Path) -> dict[str, Any]:
     try:
         return json.loads(path.read_text())
     except FileNotFoundError:
-        raise SpplError(f"{path}: missing; is {path.parent} a folder written by `sppl sample`?") from None
+        raise SpplError(
+            f"{path}: missing; is {path.parent} a folder written by `sppl sample`?") from None
     except json.JSONDecodeError as e:
         raise SpplError(f"{path}:{e.lineno}:{e.colno}: not valid JSON: {e.msg}") from None
 
@@ -215,7 +216,8 @@ def _attrs(run: RunFiles, n_chains: int, n_draws: int) -> dict[str, Any]:
     attrs: dict[str, Any] = {
         "sppl_version": __version__,
         "sampled_with": meta.get("sppl_version"),
-        "seed": meta.get("seed") if isinstance(meta.get("seed"), int) else json.dumps(meta.get("seed")),
+        "seed": (meta.get("seed") if isinstance(meta.get("seed"), int)
+                 else json.dumps(meta.get("seed"))),
         "chains": n_chains,
         "draws_per_chain": n_draws,
         "steps": meta.get("steps"),
@@ -298,7 +300,8 @@ def diagnostics(post: Posterior) -> dict[str, dict[str, float | None]]:
     def ess(a, method):
         try:
             if method == "tail":
-                return arviz_stats.ess(a, chain_axis=0, draw_axis=1, method="tail", prob=(0.05, 0.95))
+                return arviz_stats.ess(a, chain_axis=0, draw_axis=1, method="tail",
+                                       prob=(0.05, 0.95))
             return arviz_stats.ess(a, chain_axis=0, draw_axis=1, method=method)
         except TypeError:  # arviz-stats 1.x takes no prob for the tail ESS
             return arviz_stats.ess(a, chain_axis=0, draw_axis=1, method=method)

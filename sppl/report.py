@@ -121,7 +121,8 @@ def camera_figures(model, obs, map_objects, folder: Path) -> list[Figure]:
                     row[1].imshow(np.clip(rgb, 0, 1), interpolation="nearest")
                     unit, label = "", "RGB"
                 else:
-                    valid = frame.depth_valid if frame.depth_valid is not None else np.isfinite(frame.depth)
+                    valid = (frame.depth_valid if frame.depth_valid is not None
+                             else np.isfinite(frame.depth))
                     dmax = frame.camera.depth_max
                     shown = np.where(valid, frame.depth, np.nan)
                     for ax, d in ((row[0], shown), (row[1], depth)):
@@ -482,7 +483,8 @@ def diagnostics_html(diag: dict[str, dict[str, float | None]], n_chains: int) ->
             f"<td>{f(d['ess_bulk'], '.0f')}</td><td>{f(d['ess_tail'], '.0f')}</td></tr>"
         )
     note = ("" if n_chains > 1 else
-            "<p class='note'>R-hat compares chains: run with <code>--chains 4</code> to get it.</p>")
+            "<p class='note'>R-hat compares chains: run with <code>--chains 4</code> "
+            "to get it.</p>")
     return (
         "<table><tr><th>quantity</th><th>mean</th><th>sd</th><th>R-hat</th>"
         f"<th>bulk ESS</th><th>tail ESS</th></tr>{''.join(rows)}</table>{note}"

@@ -57,7 +57,10 @@ def run_chain(
     out.mkdir(parents=True, exist_ok=True)
     renderer = renderer or Renderer(model.render)
     scorer = Scorer(model, observations, renderer)
-    seed_sequence = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    if not isinstance(seed, np.random.SeedSequence):
+        seed_sequence = np.random.SeedSequence(seed)
+    else:
+        seed_sequence = seed
     rng = np.random.default_rng(seed_sequence)
     seed = _seed_record(seed)
     sampler = Sampler(model, scorer, rng)

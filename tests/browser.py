@@ -50,7 +50,8 @@ class PageCheck:
     @property
     def problems(self) -> list[str]:
         return ([f"image did not load: {u}" for u in self.broken_images]
-                + [f"load failed: {f.get('errorText')} ({f.get('type')})" for f in self.failed_loads]
+                + [f"load failed: {f.get('errorText')} ({f.get('type')})"
+                   for f in self.failed_loads]
                 + [f"script error: {e}" for e in self.exceptions]
                 + [f"console error: {e}" for e in self.console_errors])
 
@@ -85,7 +86,8 @@ class _Pipe:
             if ready:
                 chunk = os.read(self.r, 1 << 20)
                 if not chunk:
-                    err = self.proc.stderr.read().decode(errors="replace") if self.proc.stderr else ""
+                    err = (self.proc.stderr.read().decode(errors="replace")
+                           if self.proc.stderr else "")
                     raise RuntimeError(f"Chromium closed the DevTools pipe: {err[-2000:]}")
                 self.buffer += chunk
 
@@ -166,5 +168,6 @@ def check_page(page: str | Path, chromium: str, *, timeout: float = 60.0,
             e = params["entry"]
             result.console_errors.append(f"{e.get('text')} {e.get('url', '')}".strip())
         elif method == "Runtime.consoleAPICalled" and params.get("type") == "error":
-            result.console_errors.append(" ".join(str(a.get("value")) for a in params.get("args", [])))
+            args = params.get("args", [])
+            result.console_errors.append(" ".join(str(a.get("value")) for a in args))
     return result

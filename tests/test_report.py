@@ -77,7 +77,8 @@ def test_chains_run_into_their_own_folders_with_spawned_seeds(two_chains):
 
 def test_the_top_summary_pools_the_chains(two_chains):
     summary = json.loads((two_chains / "summary.json").read_text())
-    chains = [json.loads((two_chains / f"chain_{i}" / "summary.json").read_text()) for i in range(2)]
+    chains = [json.loads((two_chains / f"chain_{i}" / "summary.json").read_text())
+              for i in range(2)]
     assert summary["chains"] == 2
     assert summary["samples_used"] == sum(c["samples_used"] for c in chains)
     best = max(range(2), key=lambda i: chains[i]["map"]["score"])
@@ -142,6 +143,10 @@ def test_one_chain_keeps_its_layout_and_gets_a_posterior_file(model, obs, tmp_pa
     assert (out / "posterior.nc").exists()
     d = diagnostics(posterior_arrays(load_run(out)))
     assert d["n_objects"]["rhat"] is None  # R-hat needs two chains
+    from sppl.report import write_report
+
+    page = write_report(out).read_text()
+    assert "--chains 4" in page and "traces.png" in page
 
 
 def test_export_of_a_folder_that_is_no_run_is_one_clear_error(tmp_path):
