@@ -104,7 +104,8 @@ def recovery(estimate: Sequence[dict], truth: Sequence[dict], tolerance: float =
     for e, t, d in match_objects(estimate, truth, max_distance=tolerance):
         est, true = estimate[e], truth[t]
         cats = {k: v for k, v in true["params"].items() if isinstance(v, str)}
-        if est["class"] == true["class"] and all(est["params"].get(k) == v for k, v in cats.items()):
+        same_categories = all(est["params"].get(k) == v for k, v in cats.items())
+        if est["class"] == true["class"] and same_categories:
             found += 1
     return Recovery(found, errors.n_true, errors.n_estimated, errors.wrong_class,
                     errors.wrong_category, errors.max_position_error)
@@ -112,3 +113,24 @@ def recovery(estimate: Sequence[dict], truth: Sequence[dict], tolerance: float =
 
 def load_objects(path: str | Path) -> list[dict[str, Any]]:
     return json.loads(Path(path).read_text())["objects"]
+
+
+def log_joint(model_path: str | Path, obs: str | Path, scene: dict[str, Any]) -> float:
+    """The log joint (a trace's score) of a scene, ``{"objects": [...], "noise": {...}}``,
+    given an observation folder: what a chain's MAP should at least reach when the scene is
+    the truth (if the truth scores higher, the chains have not found the posterior's mode)."""
+    from .chain import Sampler
+    from .lang import load_model
+    from .observations import load_observations
+    from .render import Renderer
+    from .scoring import Scorer
+    from .simulate import objects_from_dict
+
+    model = load_model(model_path)
+    renderer = Renderer(model.render)
+    try:
+        sampler = Sampler(model, Scorer(model, load_observations(obs), renderer),
+                          np.random.default_rng(0))
+        return float(sampler.make_trace(objects_from_dict(model, scene), scene["noise"]).score)
+    finally:
+        renderer.release()
