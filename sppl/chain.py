@@ -105,12 +105,17 @@ class Sampler:
         new = self.evaluate(trace, proposal)
         accepted = False
         if new is not None:
-            log_alpha = new.score - trace.score + proposal.log_q_ratio
-            if proposal.ratio_fn is not None:
-                log_alpha += proposal.ratio_fn(new)
+            log_alpha = self.log_alpha(trace, proposal, new)
             accepted = bool(log_alpha >= 0.0 or math.log(self.rng.random()) < log_alpha)
         self.stats.record(proposal.move, proposal.label, accepted)
         return new if accepted else trace
+
+    def log_alpha(self, trace: Trace, proposal: moves.Proposal, new: Trace) -> float:
+        """log of the Metropolis-Hastings ratio of moving from ``trace`` to ``new``."""
+        log_alpha = new.score - trace.score + proposal.log_q_ratio
+        if proposal.ratio_fn is not None:
+            log_alpha += proposal.ratio_fn(new)
+        return log_alpha
 
     # -- the schedule -------------------------------------------------------------------------
 
@@ -126,13 +131,36 @@ class Sampler:
                 trace = self.step(trace, moves.propose_noise(m, trace, kind, p.name, rng))
         return trace
 
+    def adjoint_sweep(self, trace: Trace) -> Trace:
+        """The time reversal of ``sweep``: its moves in the opposite order.
+
+        Every move is reversible, so a sweep's adjoint with respect to the posterior is the
+        same moves in reverse order. Running it backwards from a posterior draw gives the past
+        of a stationary chain, which simulation-based calibration uses (``sppl.verify.sbc``).
+        Keep it the mirror image of ``sweep``.
+        """
+        m, rng = self.model, self.rng
+        for kind, sensor in reversed(list(m.sensors.items())):
+            for p in reversed(sensor.noise):
+                trace = self.step(trace, moves.propose_noise(m, trace, kind, p.name, rng))
+        if rng.random() < m.inference.p_jump:
+            trace = self.step(trace, self.propose_jump(trace))
+        for k in reversed(range(len(trace.objects))):
+            for block in reversed(moves.parameter_blocks(trace.objects[k].cls)):
+                trace = self.step(trace, moves.propose_parameters(m, trace, k, block, rng))
+        return trace
+
     def propose_jump(self, trace: Trace) -> moves.Proposal | None:
         u = self.rng.random()
         if u < self.jump["birth"]:
             return moves.propose_birth(self.model, trace, self.rng, self.birth)
         if u < self.jump["birth"] + self.jump["death"]:
             return moves.propose_death(self.model, trace, self.rng, self.birth)
-        return moves.propose_change(self.model, trace, self.rng)
+        if u < 1.0 - self.jump["replace"]:
+            return moves.propose_change(self.model, trace, self.rng)
+        return moves.propose_replace(
+            self.model, trace, self.rng, self.birth, lambda objs: self.make_trace(objs, trace.noise)
+        )
 
     def prune(self, trace: Trace) -> Trace:
         """Greedy deaths that raise the score, until none does.

@@ -164,9 +164,10 @@ class InferenceSettings:
     # draw from the prior (sppl/birth.py), and the spread of that placement in metres.
     data_birth: float = 0.5
     data_birth_spread: float = 0.25
-    # Relative weights of birth, death and change among model jumps (thesis: equal).
+    # Relative weights of the model jumps. The thesis has birth, death and change, equally
+    # weighted; replace (sppl.moves.propose_replace) is sppl's addition.
     jump_weights: Mapping[str, float] = field(
-        default_factory=lambda: {"birth": 1.0, "death": 1.0, "change": 1.0}
+        default_factory=lambda: {"birth": 1.0, "death": 1.0, "change": 1.0, "replace": 1.0}
     )
 
 

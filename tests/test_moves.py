@@ -32,12 +32,14 @@ def _log_alpha(sampler, trace, proposal):
     return new, new.score - trace.score + proposal.log_q_ratio + extra
 
 
-def reverse_of_birth(sampler, born):
-    """The death of exactly the object a birth added (the last one)."""
-    model, k = sampler.model, len(born.objects) - 1
+def reverse_of_birth(sampler, born, birth):
+    """The death of exactly the object a birth added (at a uniformly chosen place)."""
+    model = sampler.model
+    k = next(i for i, o in enumerate(born.objects) if o is birth.changed[0])
     gone = born.objects[k]
     return moves.Proposal(
-        "death", gone.cls.name, born.objects[:k], born.noise, (), -moves.log_q_death(model, k + 1),
+        "death", gone.cls.name, born.objects[:k] + born.objects[k + 1 :], born.noise, (),
+        -moves.log_q_death(model, len(born.objects)),
         lambda after: moves.log_q_birth(model, gone.cls, gone.values, sampler.birth, after),
     )
 
@@ -62,7 +64,7 @@ def test_birth_then_death_ratios_are_negatives(model):
     for _ in range(20):
         birth = moves.propose_birth(model, trace, rng, sampler.birth)
         born, a_fwd = _log_alpha(sampler, trace, birth)
-        back, a_rev = _log_alpha(sampler, born, reverse_of_birth(sampler, born))
+        back, a_rev = _log_alpha(sampler, born, reverse_of_birth(sampler, born, birth))
         assert a_fwd == pytest.approx(-a_rev)
         assert back.score == pytest.approx(trace.score)
 
