@@ -1,7 +1,8 @@
-"""The ``sppl`` command: check, simulate and sample.
+"""The ``sppl`` command: check, simulate, sample and verify.
 
 Exit status: 0 on success, 1 on an error in the user's input (one message on stderr, no
-traceback unless ``--debug``), 2 on a usage error, 130 when interrupted.
+traceback unless ``--debug``) or when a check of ``sppl verify`` fails, 2 on a usage error, 130
+when interrupted.
 """
 
 from __future__ import annotations
@@ -17,9 +18,11 @@ from . import __version__
 from .errors import SpplError, UsageError
 
 DEFAULT_STEPS = 20000
+VERIFY_STEPS = 20000
 
 EPILOG = """\
-exit status: 0 success, 1 bad input (model, observations, options), 2 usage, 130 interrupted.
+exit status: 0 success, 1 bad input (model, observations, options) or a failed verify check,
+2 usage, 130 interrupted.
 Documentation: docs/ in the source tree (tutorial, language, inference, observations)."""
 
 
@@ -75,6 +78,26 @@ def _parser() -> argparse.ArgumentParser:
                    help="independent chains, run in parallel processes, each into "
                    "OUT/chain_<i>/ with its own stream of --seed; OUT/summary.json pools them "
                    "and gives R-hat (default: 1, written straight into OUT)")
+
+    v = sub.add_parser(
+        "verify",
+        help="check that the sampler derived from a model is correct: prior recovery, "
+        "move reverses and a short Geweke test, as a table",
+    )
+    v.add_argument("model", type=Path)
+    v.add_argument("--steps", type=int, default=VERIFY_STEPS,
+                   help=f"sweeps of the prior-recovery chain (default: {VERIFY_STEPS})")
+    v.add_argument("--seed", type=int, default=0)
+    v.add_argument("--geweke", action=argparse.BooleanOptionalAction, default=True,
+                   help="run the Geweke test, which renders (default: on)")
+    v.add_argument("--geweke-chains", type=int, default=100,
+                   help="independent Geweke chains (default: 100)")
+    v.add_argument("--geweke-length", type=int, default=20,
+                   help="sweeps per Geweke chain (default: 20)")
+    v.add_argument("--size", type=int, default=8,
+                   help="width and height in pixels of the Geweke test's images (default: 8)")
+    v.add_argument("--alpha", type=float, default=0.01,
+                   help="family-wise false-alarm rate of the whole table (default: 0.01)")
 
     e = sub.add_parser(
         "export",
@@ -234,8 +257,29 @@ def cmd_report(args) -> int:
     return 0
 
 
+def cmd_verify(args) -> int:
+    from .lang import load_model
+    from .verify import verify_model
+
+    if args.steps < 100 or args.geweke_chains < 2 or args.geweke_length < 1 or args.size < 4:
+        raise UsageError(
+            "--steps must be at least 100, --geweke-chains 2, --geweke-length 1, --size 4"
+        )
+    if not 0.0 < args.alpha < 1.0:
+        raise UsageError("--alpha is a probability between 0 and 1")
+    model = load_model(args.model)
+    report = verify_model(
+        model, steps=args.steps, seed=args.seed, run_geweke=args.geweke,
+        geweke_chains=args.geweke_chains, geweke_length=args.geweke_length, size=args.size,
+        alpha=args.alpha, progress=lambda message: print(message, file=sys.stderr, flush=True),
+    )
+    print(f"{args.model}: verifying the sampler derived from this model")
+    print(report.table())
+    return 0 if report.passed else 1
+
+
 COMMANDS = {"check": cmd_check, "fmt": cmd_fmt, "simulate": cmd_simulate, "sample": cmd_sample,
-            "export": cmd_export, "report": cmd_report}
+            "verify": cmd_verify, "export": cmd_export, "report": cmd_report}
 
 
 def main(argv: list[str] | None = None) -> int:
