@@ -245,8 +245,8 @@ def plot_occupancy(ax, model, samples, map_objects, truth, cameras, extent=None)
     extent = extent or _extent(model, list(map_objects) + list(truth or []), cameras)
     grid = occupancy_grid(model, samples, extent)
     im = ax.imshow(grid, origin="lower", extent=extent, cmap="Greys", vmin=0, vmax=1)
-    for objs, style, label in ((map_objects, dict(color="#1f77b4", ls="--", lw=1.4), "MAP"),
-                               (truth or [], dict(color="#d62728", ls="-", lw=1.4), "truth")):
+    for objs, style, label in ((map_objects, {"color": "#1f77b4", "ls": "--", "lw": 1.4}, "MAP"),
+                               (truth or [], {"color": "#d62728", "ls": "-", "lw": 1.4}, "truth")):
         first = True
         for o in objs:
             fp = _footprint(model, o)

@@ -38,6 +38,18 @@ def find_chromium() -> str | None:
     return None
 
 
+def require_chromium() -> str:
+    """Chromium's path; the test is skipped without one, except on CI, where it fails."""
+    import pytest
+
+    chromium = find_chromium()
+    if chromium is None:
+        if os.environ.get("CI") == "true":
+            pytest.fail("CI must have Chromium (Debian's chromium package) for the report test")
+        pytest.skip("no chromium on this machine (Debian: apt-get install chromium)")
+    return chromium
+
+
 @dataclass
 class PageCheck:
     images: int = 0
@@ -114,7 +126,7 @@ def check_page(page: str | Path, chromium: str, *, timeout: float = 60.0,
     with tempfile.TemporaryDirectory(prefix="sppl-chromium-") as profile:
         proc = subprocess.Popen(
             [chromium, *FLAGS, f"--user-data-dir={profile}", "about:blank"],
-            pass_fds=(3, 4), preexec_fn=child_fds,
+            pass_fds=(3, 4), preexec_fn=child_fds,  # noqa: PLW1509 - no threads here
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
         )
         os.close(to_browser_r)

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -22,7 +21,7 @@ FIGURES = {
 
 def run_example(script: str, *args, timeout: int = 600) -> str:
     r = subprocess.run([sys.executable, str(ROOT / "examples" / script), *map(str, args)],
-                       capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+                       capture_output=True, text=True, timeout=timeout, cwd=ROOT, check=False)
     assert r.returncode == 0, f"{script} failed:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
     return r.stdout
 
@@ -76,14 +75,18 @@ def test_example_regenerates_its_figures(script, tmp_path, require_gl):
 def test_four_chains_on_three_shapes_agree_and_report_opens(tmp_path, require_gl):
     """The issue's bar: R-hat of the number of objects below 1.05 on a 4-chain run with the
     default settings, and its report opening in headless Chromium with nothing missing."""
-    from browser import check_page, find_chromium
+    from browser import check_page, find_chromium, require_chromium
 
-    run_example("three_shapes/chains.py", "--out", tmp_path / "run",
-                "--images", tmp_path / "images", timeout=3600)
+    out = run_example("three_shapes/chains.py", "--out", tmp_path / "run",
+                      "--images", tmp_path / "images", timeout=3600)
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    failures = []
+    if not summary["diagnostics"]["n_objects"]["rhat"] < 1.05:
+        failures.append(f"R-hat of the number of objects is not below 1.05:\n{out}")
     chromium = find_chromium()
     if chromium is not None:
-        assert check_page(tmp_path / "run" / "report" / "index.html", chromium).problems == []
-    elif os.environ.get("CI") == "true":
-        pytest.fail("CI must have Chromium (Debian's chromium package)")
-    assert summary["diagnostics"]["n_objects"]["rhat"] < 1.05, summary["diagnostics"]
+        page = check_page(tmp_path / "run" / "report" / "index.html", chromium)
+        if page.images < 6 or page.problems:
+            failures.append(f"the report page: {page.images} images, {page.problems}")
+    assert not failures, "\n".join(failures)
+    require_chromium()  # without Chromium the page is unchecked: skip (on CI, fail)

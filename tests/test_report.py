@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import re
 import signal
 import subprocess
@@ -186,16 +185,27 @@ def test_the_report_without_a_truth(two_chains, tmp_path):
 
 
 def test_the_report_opens_in_headless_chromium_with_nothing_missing(report):
-    from browser import check_page, find_chromium
+    from browser import check_page, require_chromium
 
-    chromium = find_chromium()
-    if chromium is None:
-        if os.environ.get("CI") == "true":
-            pytest.fail("CI must have Chromium (Debian's chromium package) for the report test")
-        pytest.skip("no chromium on this machine (Debian: apt-get install chromium)")
-    result = check_page(report, chromium)
+    result = check_page(report, require_chromium())
     assert result.images >= 6
     assert result.problems == []
+
+
+def test_the_browser_check_sees_a_missing_image_and_a_script_error(tmp_path):
+    """The check above would pass on a page it could not read: make sure it can fail."""
+    from browser import check_page, require_chromium
+
+    Image = pytest.importorskip("PIL.Image")
+    Image.new("RGB", (4, 4)).save(tmp_path / "here.png")
+    page = tmp_path / "index.html"
+    page.write_text("<!DOCTYPE html><html><body><img src='here.png'><img src='gone.png'>"
+                    "<script>undefined_function();</script></body></html>")
+    result = check_page(page, require_chromium())
+    assert result.images == 2
+    assert [u.rsplit("/", 1)[-1] for u in result.broken_images] == ["gone.png"]
+    assert any("undefined_function" in e for e in result.exceptions), result
+    assert len(result.problems) >= 2
 
 
 def test_ctrl_c_stops_every_chain_with_a_summary(model, obs, tmp_path):

@@ -14,6 +14,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 FENCE = re.compile(r"^```([^\n]*)\n(.*?)^```\s*$", re.MULTILINE | re.DOTALL)
 INSTALL = "python3 -m pip install -e '.[test]'"
@@ -42,23 +44,56 @@ def test_the_tutorial_installs_the_way_ci_does():
     assert INSTALL in (ROOT / "README.md").read_text()
 
 
-def test_every_command_of_the_tutorial_runs(tmp_path, require_gl):
-    steps = tutorial_steps((ROOT / "docs" / "tutorial.md").read_text())
-    assert sum(kind == "run" for kind, _, _ in steps) >= 6
-    (tmp_path / "models").symlink_to(ROOT / "models", target_is_directory=True)
+def run_steps(steps, folder: Path) -> None:
+    """Write each file and run each command in ``folder``, in order; AssertionError naming the
+    first command that exits non-zero. ``python`` is this interpreter, ``sppl`` its command."""
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}"}
     for kind, what, content in steps:
         if kind == "file":
-            path = tmp_path / what
+            path = folder / what
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_text(content)
             continue
         if what == INSTALL:
             continue
         command = re.sub(r"^python3? ", f"{sys.executable} ", what)
-        r = subprocess.run(command, shell=True, cwd=tmp_path, env=env, capture_output=True,
-                           text=True, timeout=600)
+        r = subprocess.run(command, shell=True, cwd=folder, env=env, capture_output=True,
+                           text=True, timeout=600, check=False)
         assert r.returncode == 0, f"`{what}` failed:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+
+
+def test_every_block_of_the_tutorial_is_a_file_or_commands():
+    """A command in a block of another kind would be silently left out of the run below."""
+    text = (ROOT / "docs" / "tutorial.md").read_text()
+    for info, body in FENCE.findall(text):
+        words = info.split()
+        assert words and (words[0] == "console" or any(w.startswith("file=") for w in words)), (
+            f"a ```{info} block the tests would not run:\n{body}")
+    console = [body for info, body in FENCE.findall(text) if info.split()[0] == "console"]
+    assert all(line.startswith("$ ") for body in console for line in body.splitlines()
+               if line.strip()), "a console block holds a line that is not a command"
+
+
+def test_the_runner_reads_every_command_and_stops_at_a_failing_one(tmp_path):
+    page = ("Some text.\n\n```console\n$ echo one > one.txt\n$ echo two > two.txt\n```\n\n"
+            "```text file=dir/three.txt\nthree\n```\n\n```console\n$ cat dir/three.txt\n"
+            "$ python -c 'raise SystemExit(3)'\n$ echo never > never.txt\n```\n")
+    steps = tutorial_steps(page)
+    assert [(k, w) for k, w, _ in steps] == [
+        ("run", "echo one > one.txt"), ("run", "echo two > two.txt"), ("file", "dir/three.txt"),
+        ("run", "cat dir/three.txt"), ("run", "python -c 'raise SystemExit(3)'"),
+        ("run", "echo never > never.txt")]
+    with pytest.raises(AssertionError, match="SystemExit"):
+        run_steps(steps, tmp_path)
+    assert (tmp_path / "two.txt").exists() and (tmp_path / "dir" / "three.txt").exists()
+    assert not (tmp_path / "never.txt").exists()
+
+
+def test_every_command_of_the_tutorial_runs(tmp_path, require_gl):
+    steps = tutorial_steps((ROOT / "docs" / "tutorial.md").read_text())
+    assert sum(kind == "run" for kind, _, _ in steps) >= 6
+    (tmp_path / "models").symlink_to(ROOT / "models", target_is_directory=True)
+    run_steps(steps, tmp_path)
     # What the page promises is there.
     run = tmp_path / "tutorial" / "run"
     for f in ("chain_0/samples.jsonl", "chain_1/samples.jsonl", "summary.json", "posterior.nc",
