@@ -18,6 +18,7 @@ from . import __version__
 from .errors import SpplError, UsageError
 
 DEFAULT_STEPS = 20000
+CHECKPOINT_SECONDS = 30.0  # sppl.run.CHECKPOINT_SECONDS, without importing the engine for --help
 VERIFY_STEPS = 20000
 
 EPILOG = """\
@@ -63,21 +64,33 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--force", action="store_true", help="replace --out if it exists")
 
     r = sub.add_parser("sample", help="draw posterior samples of the scene given observations")
-    r.add_argument("model", type=Path)
-    r.add_argument("--obs", type=Path, required=True, help="observation folder (transforms.json)")
-    r.add_argument("--out", type=Path, default=Path("run"), help="run folder to write (default: run)")
-    r.add_argument("--steps", type=int, default=DEFAULT_STEPS,
-                   help=f"sweeps of the sampler (default: {DEFAULT_STEPS})")
-    r.add_argument("--seed", type=int, default=0)
-    r.add_argument("--thin", type=int, default=1, help="keep every n-th sweep (default: 1)")
+    r.add_argument("model", type=Path, nargs="?",
+                   help="the model file (.scn); with --resume, default: the run's")
+    r.add_argument("--obs", type=Path,
+                   help="observation folder (transforms.json); with --resume, default: the run's")
+    r.add_argument("--out", type=Path, default=None,
+                   help="run folder to write (default: run)")
+    r.add_argument("--steps", type=int, default=None,
+                   help=f"sweeps of the sampler in all (default: {DEFAULT_STEPS}; with --resume, "
+                   "the run's)")
+    r.add_argument("--seed", type=int, default=None, help="(default: 0)")
+    r.add_argument("--thin", type=int, default=None, help="keep every n-th sweep (default: 1)")
     r.add_argument("--burn", type=int, default=None,
                    help="sweeps left out of the posterior summary (default: half)")
     r.add_argument("--force", action="store_true", help="replace --out if it exists")
     r.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
-    r.add_argument("--chains", type=int, default=1,
+    r.add_argument("--chains", type=int, default=None,
                    help="independent chains, run in parallel processes, each into "
                    "OUT/chain_<i>/ with its own stream of --seed; OUT/summary.json pools them "
                    "and gives R-hat (default: 1, written straight into OUT)")
+    r.add_argument("--resume", type=Path, default=None, metavar="RUN",
+                   help="continue the stopped run in RUN from its checkpoints, with its model, "
+                   "observations, seed, thin and chains, up to --steps sweeps in all; the samples "
+                   "are exactly those of an uninterrupted run")
+    r.add_argument("--checkpoint-every", type=float, default=CHECKPOINT_SECONDS,
+                   metavar="SECONDS",
+                   help="save each chain's full state this often, for --resume "
+                   f"(default: {CHECKPOINT_SECONDS:g})")
 
     v = sub.add_parser(
         "verify",
@@ -220,14 +233,28 @@ def cmd_sample(args) -> int:
     from .run import run_chains
     from .samples import format_summary
 
+    if args.resume is not None:
+        _resume_settings(args)
+    else:
+        if args.model is None or args.obs is None:
+            raise UsageError("sample needs a model file and --obs (or --resume RUN)")
+        args.out = args.out or Path("run")
+        args.steps = DEFAULT_STEPS if args.steps is None else args.steps
+        args.seed = 0 if args.seed is None else args.seed
+        args.thin = 1 if args.thin is None else args.thin
+        args.chains = 1 if args.chains is None else args.chains
     if args.steps < 1 or args.thin < 1 or args.chains < 1:
         raise UsageError("--steps, --thin and --chains must be at least 1")
+    if not args.checkpoint_every >= 0:
+        raise UsageError("--checkpoint-every is a number of seconds, 0 or more")
     model = load_model(args.model)
     obs = load_observations(args.obs)
-    _prepare_out(args.out, args.force)
+    if args.resume is None:
+        _prepare_out(args.out, args.force)
     result = run_chains(
         model, obs, args.out, chains=args.chains, steps=args.steps, seed=args.seed,
         thin=args.thin, burn=args.burn, progress=False if args.quiet else None,
+        resume=args.resume is not None, checkpoint_seconds=args.checkpoint_every,
     )
     print(format_summary(result.summary))
     samples = args.out / ("samples.jsonl" if args.chains == 1 else "chain_*/samples.jsonl")
@@ -236,7 +263,50 @@ def cmd_sample(args) -> int:
         print(f"posterior (ArviZ): {write_posterior(args.out)}")
     except SpplError as e:
         print(f"no posterior file: {e}", file=sys.stderr)
-    return 130 if result.summary["interrupted"] else 0
+    if result.summary["interrupted"]:
+        print(f"to continue: sppl sample --resume {args.out}", file=sys.stderr)
+        return 130
+    return 0
+
+
+def _resume_settings(args) -> None:
+    """Fill the options of ``sample --resume RUN`` from the run's record; refuse to change
+    what would make the continued chain another chain."""
+    from .run import read_run
+
+    run = args.resume
+    if args.out is not None and args.out.resolve() != run.resolve():
+        raise UsageError("--resume continues a run in its own folder; leave out --out")
+    if args.force:
+        raise UsageError("--resume continues a run and --force replaces it; choose one")
+    meta, steps_done = read_run(run)
+    args.out = run
+    args.model = args.model or _recorded(run, meta.get("model"), "model file",
+                                         "the model argument")
+    args.obs = args.obs or _recorded(run, meta.get("observations"), "observations", "--obs")
+    for option in ("seed", "thin", "chains"):
+        recorded = meta.get(option, 1 if option == "chains" else None)
+        given = getattr(args, option)
+        if given is not None and given != recorded:
+            raise UsageError(f"--{option} {given} differs from the run's ({recorded}); a resumed "
+                             f"run keeps its --{option}")
+        setattr(args, option, recorded)
+    args.steps = meta["steps"] if args.steps is None else args.steps
+    args.burn = meta.get("burn") if args.burn is None else args.burn
+    if args.steps <= steps_done:
+        raise UsageError(f"{run} has already drawn {steps_done} of {args.steps} steps; give a "
+                         "larger --steps to continue it")
+
+
+def _recorded(run: Path, recorded: str | None, what: str, option: str) -> Path:
+    if not recorded:
+        raise UsageError(f"{run / 'run.json'} names no {what}; give it with {option}")
+    path = Path(recorded)
+    if not path.exists():
+        raise UsageError(f"{run / 'run.json'} names the {what} {recorded}, which does not exist "
+                         f"from here (it is relative to where the run started); give it with "
+                         f"{option}")
+    return path
 
 
 def cmd_export(args) -> int:

@@ -108,3 +108,7 @@ class RenderError(SpplError):
 
 class UsageError(SpplError):
     """A command-line option or output folder that cannot be used."""
+
+
+class RunError(SpplError):
+    """A run folder that cannot be resumed: no checkpoint, a damaged one, or changed inputs."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import signal
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,15 +15,54 @@ from tqdm import tqdm
 
 from . import __version__
 from .chain import Sampler
-from .errors import SpplError
+from .checkpoint import (
+    CHECKPOINT,
+    capture,
+    model_fingerprint,
+    observations_fingerprint,
+    read_checkpoint,
+    restore,
+    write_checkpoint,
+)
+from .errors import RunError, SpplError
 from .model import Model
 from .observations import Observations
-from .samples import SampleWriter, format_summary, read_samples, summarise
+from .samples import SampleWriter, format_summary, read_samples, summarise, truncate_samples
 from .scoring import Scorer
 
 
+CHECKPOINT_SECONDS = 30.0  # how often a chain saves its full state (``--checkpoint-every``)
+
+
 class Stop(Exception):
-    """Raised by the SIGTERM handler so a terminated run ends like an interrupted one."""
+    """Raised by a second SIGINT or SIGTERM: stop now, mid-sweep, without a last checkpoint."""
+
+
+class _StopRequest:
+    """SIGINT and SIGTERM ask the chain to stop at the end of the sweep it is drawing, so that
+    the samples, the last checkpoint and the summary all describe one state of the chain; a
+    second signal stops it at once (the previous checkpoint then stands). A signal that is
+    ignored (SIGINT in a chain's worker process, which the parent stops) stays ignored."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self.previous: dict[int, Any] = {}
+
+    def __enter__(self) -> _StopRequest:
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                if signal.getsignal(sig) is not signal.SIG_IGN:
+                    self.previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        if self.requested:
+            raise Stop()
+        self.requested = True
+
+    def __exit__(self, *exc) -> None:
+        for sig, handler in self.previous.items():
+            signal.signal(sig, handler)
 
 
 @dataclass
@@ -45,13 +85,18 @@ def run_chain(
     progress: bool | None = None,
     extra: dict[str, Any] | None = None,
     callback=None,
+    resume: bool = False,
+    checkpoint_seconds: float = CHECKPOINT_SECONDS,
 ) -> RunResult:
     """Run one chain for ``steps`` sweeps from an empty scene, streaming samples to
-    ``out/samples.jsonl`` and writing ``out/summary.json``. Ctrl-C or SIGTERM stop it early
-    with everything drawn so far on disk and summarised. ``callback(step, trace, best,
-    sampler)``, if given, is called after every sweep; returning True stops the run.
-    ``seed`` is an integer or, for one of several chains, a ``SeedSequence`` spawned from the
-    run's seed (``run_chains``)."""
+    ``out/samples.jsonl`` and writing ``out/summary.json``. Ctrl-C or SIGTERM stop it at the
+    end of the current sweep with everything drawn so far on disk and summarised. Every
+    ``checkpoint_seconds`` (and when it stops) the chain's full state goes to
+    ``out/checkpoint.json``; with ``resume=True`` the chain continues from there up to
+    ``steps`` sweeps in all, drawing exactly the samples an uninterrupted run draws.
+    ``callback(step, trace, best, sampler)``, if given, is called after every sweep; returning
+    True stops the run. ``seed`` is an integer or, for one of several chains, a
+    ``SeedSequence`` spawned from the run's seed (``run_chains``)."""
     from .render import Renderer, renderer_string
 
     out.mkdir(parents=True, exist_ok=True)
@@ -64,50 +109,78 @@ def run_chain(
     rng = np.random.default_rng(seed_sequence)
     seed = _seed_record(seed)
     sampler = Sampler(model, scorer, rng)
-    burn = steps // 2 if burn is None else burn
+    burn_option, burn = burn, steps // 2 if burn is None else burn
+    fingerprints = {"model_sha256": model_fingerprint(model),
+                    "observations_sha256": observations_fingerprint(observations)}
+    state = None
+    if resume and (out / "run.json").exists():
+        _check_same_inputs(out, fingerprints)
+        state = read_checkpoint(out)
     meta = {
         "sppl_version": __version__,
         "seed": seed,
         "steps": steps,
         "thin": thin,
+        "burn": burn_option,
         "model": str(model.path) if model.path else None,
         "observations": str(observations.root),
         "gl_renderer": renderer_string(),
+        **fingerprints,
         **(extra or {}),
     }
     (out / "run.json").write_text(json.dumps(meta, indent=2))
+
+    if state is not None:
+        restored = restore(sampler, state, out / CHECKPOINT)
+        trace, best, best_step = restored.trace, restored.best, restored.best_step
+        start, seconds_before = restored.step, restored.seconds
+    else:
+        trace = sampler.initial_trace()
+        best, best_step, start, seconds_before = trace, 0, 0, 0.0
+    # A resumed chain draws the samples after its checkpoint again; a new one starts empty.
+    truncate_samples(out / "samples.jsonl", start)
     writer = SampleWriter(out / "samples.jsonl")
-
-    def on_term(signum, frame):
-        raise Stop()
-
-    previous = signal.signal(signal.SIGTERM, on_term)
-    trace = sampler.initial_trace()
-    best, best_step = trace, 0
-    done, interrupted = 0, False
+    done, interrupted = start, False
     t0 = time.monotonic()
-    bar = tqdm(total=steps, disable=None if progress is None else not progress, unit="step",
-               dynamic_ncols=True, leave=False)
+
+    def save(step: int) -> None:
+        writer.sync()  # every sample up to the checkpoint's step is on disk before it
+        seconds = seconds_before + time.monotonic() - t0
+        write_checkpoint(out, capture(sampler, trace, step, best, best_step, seconds))
+
+    if state is None:
+        save(0)  # resumable from the start, and no stale checkpoint of an earlier run left
+    last_save = time.monotonic()
+    bar = tqdm(total=steps, initial=start, disable=None if progress is None else not progress,
+               unit="step", dynamic_ncols=True, leave=False)
     try:
-        for step in range(1, steps + 1):
-            trace = sampler.sweep(trace)
-            done = step
-            if trace.score > best.score:
-                best, best_step = trace, step
-            if step % thin == 0:
-                writer.write(step, trace)
-            bar.update(1)
-            if callback is not None and callback(step, trace, best, sampler):
-                break
-            if step % 50 == 0:
-                bar.set_postfix(objects=trace.n_objects, log_joint=f"{trace.score:.0f}", refresh=False)
-    except (KeyboardInterrupt, Stop):
-        interrupted = True
+        with _StopRequest() as stop:
+            for step in range(start + 1, steps + 1):
+                trace = sampler.sweep(trace)
+                done = step
+                if trace.score > best.score:
+                    best, best_step = trace, step
+                if step % thin == 0:
+                    writer.write(step, trace)
+                bar.update(1)
+                if callback is not None and callback(step, trace, best, sampler):
+                    break
+                if stop.requested:
+                    break
+                if time.monotonic() - last_save >= checkpoint_seconds:
+                    save(step)
+                    last_save = time.monotonic()
+                if step % 50 == 0:
+                    bar.set_postfix(objects=trace.n_objects, log_joint=f"{trace.score:.0f}",
+                                    refresh=False)
+            interrupted = stop.requested and done < steps
+            save(done)
+    except Stop:
+        interrupted = True  # stopped mid-sweep: the last checkpoint stands
     finally:
         bar.close()
         writer.close()
-        signal.signal(signal.SIGTERM, previous)
-    seconds = time.monotonic() - t0
+    seconds = seconds_before + time.monotonic() - t0
     best = sampler.prune(best)
     map_sample = {"step": best_step, "score": best.score, "log_likelihood": best.log_likelihood,
                   **best.as_dict()}
@@ -117,11 +190,47 @@ def run_chain(
         map_sample,
         sampler.stats.as_dict(),
         burn=min(burn, done // 2) if interrupted else burn,
-        extra={"steps_done": done, "seconds": seconds, "interrupted": interrupted, "seed": seed},
+        extra={"steps_done": done, "seconds": seconds, "interrupted": interrupted, "seed": seed,
+               "resumed_from": start if state is not None else None},
     )
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     (out / "summary.txt").write_text(format_summary(summary) + "\n")
     return RunResult(summary, best, trace)
+
+
+def read_run(out: Path) -> tuple[dict[str, Any], int]:
+    """A run folder's record (``run.json``) and the steps every one of its chains has
+    checkpointed, for ``sppl sample --resume``."""
+    try:
+        meta = json.loads((out / "run.json").read_text())
+    except FileNotFoundError:
+        raise RunError("not a run folder (it has no run.json)", path=out,
+                       hint="--resume takes the --out folder of an earlier `sppl sample`") from None
+    except (OSError, json.JSONDecodeError) as e:
+        raise RunError(f"cannot read the run's record ({e})", path=out / "run.json") from None
+    if not isinstance(meta, dict) or not isinstance(meta.get("steps"), int):
+        raise RunError("run.json is not the record of an `sppl sample` run", path=out)
+    folders = [out / name for name in meta.get("chain_folders", [])] or [out]
+    done = []
+    for folder in folders:
+        state = read_checkpoint(folder) if folder.is_dir() else None
+        done.append(0 if state is None else int(state["step"]))
+    return meta, min(done)
+
+
+def _check_same_inputs(out: Path, fingerprints: dict[str, str]) -> None:
+    """A run resumes only on the model and observations it started with."""
+    try:
+        meta = json.loads((out / "run.json").read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise RunError(f"cannot read the run's record ({e})", path=out / "run.json") from None
+    for key, what in (("model_sha256", "model"), ("observations_sha256", "observations")):
+        if meta.get(key) not in (None, fingerprints[key]):
+            raise RunError(
+                f"the {what} differ from those this run started with, so resuming would "
+                "mix two posteriors", path=out,
+                hint=f"resume with the run's original {what}, or start a new run",
+            )
 
 
 def _seed_record(seed: int | np.random.SeedSequence) -> Any:
@@ -140,7 +249,7 @@ def chain_folder(out: Path, index: int) -> Path:
 
 
 def _chain_worker(source, path, observations, out, steps, seed, thin, burn, index, extra, done,
-                  errors) -> None:
+                  errors, resume=False, checkpoint_seconds=CHECKPOINT_SECONDS) -> None:
     """One chain in its own process (and so with its own GL context). SIGINT is left to the
     parent, which stops the chains with SIGTERM: run_chain then ends as if interrupted."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -154,7 +263,8 @@ def _chain_worker(source, path, observations, out, steps, seed, thin, burn, inde
             return False
 
         run_chain(model, observations, Path(out), steps=steps, seed=seed, thin=thin, burn=burn,
-                  progress=False, extra=extra, callback=tick)
+                  progress=False, extra=extra, callback=tick, resume=resume,
+                  checkpoint_seconds=checkpoint_seconds)
     except SpplError as e:
         errors.put((index, str(e)))
         raise SystemExit(1) from None
@@ -176,19 +286,26 @@ def run_chains(
     thin: int = 1,
     burn: int | None = None,
     progress: bool | None = None,
+    resume: bool = False,
+    checkpoint_seconds: float = CHECKPOINT_SECONDS,
 ) -> RunResult:
     """Run ``chains`` chains in parallel processes, chain i into ``out/chain_<i>/`` with the
     i-th stream of ``SeedSequence(seed).spawn(chains)``, then combine them into ``out/``'s
     ``run.json``, ``summary.json`` and ``summary.txt`` (the MAP over all chains, the
     posterior over the pooled samples, R-hat and ESS of the label-invariant quantities).
     One chain is exactly ``run_chain`` into ``out/``. Ctrl-C or SIGTERM stop every chain
-    with what it has drawn on disk, and the combined summary is still written."""
+    with what it has drawn on disk, and the combined summary is still written. With
+    ``resume=True`` each chain continues from its own checkpoint (see ``run_chain``)."""
     import multiprocessing as mp
 
     if chains == 1:
         return run_chain(model, observations, out, steps=steps, seed=seed, thin=thin, burn=burn,
-                         progress=progress)
+                         progress=progress, resume=resume, checkpoint_seconds=checkpoint_seconds)
     out.mkdir(parents=True, exist_ok=True)
+    fingerprints = {"model_sha256": model_fingerprint(model),
+                    "observations_sha256": observations_fingerprint(observations)}
+    if resume and (out / "run.json").exists():
+        _check_same_inputs(out, fingerprints)  # before any chain starts
     seeds = np.random.SeedSequence(seed).spawn(chains)
     meta = {
         "sppl_version": __version__,
@@ -196,9 +313,11 @@ def run_chains(
         "chains": chains,
         "steps": steps,
         "thin": thin,
+        "burn": burn,
         "model": str(model.path) if model.path else None,
         "observations": str(observations.root),
         "chain_folders": [chain_folder(out, i).name for i in range(chains)],
+        **fingerprints,
     }
     (out / "run.json").write_text(json.dumps(meta, indent=2))
     ctx = mp.get_context("spawn")
@@ -209,7 +328,8 @@ def run_chains(
             target=_chain_worker, name=f"sppl-chain-{i}",
             args=(model.source, str(model.path) if model.path else None, observations,
                   str(chain_folder(out, i)), steps, seeds[i], thin, burn, i,
-                  {"chain": i, "chains": chains, "master_seed": seed}, done, errors),
+                  {"chain": i, "chains": chains, "master_seed": seed}, done, errors, resume,
+                  checkpoint_seconds),
         )
         for i in range(chains)
     ]
