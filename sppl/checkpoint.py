@@ -119,26 +119,29 @@ def _decode(value: Any) -> Any:
 
 def _trace_record(trace: Trace) -> dict[str, Any]:
     # Floats go through repr, which reads back to the same double: the resumed chain continues
-    # from bit-identical values.
-    return {"score": trace.score, **trace.as_dict()}
+    # from bit-identical values. The likelihood's statistics are kept too, so that the resumed
+    # trace scores exactly what the saved one did, whatever path of renders led to it.
+    stats = [[frame, kind, _encode(np.asarray(s))] for (frame, kind), s in trace.stats.items()]
+    return {"score": trace.score, "stats": stats, **trace.as_dict()}
 
 
 def _trace(sampler, record: dict[str, Any], path: Path) -> Trace:
     model = sampler.model
-    objects = []
-    for o in record["objects"]:
-        obj = make_object(model, model.object_class(o["class"]), o["params"])
-        objects.append(obj)
-    trace = sampler.make_trace(tuple(objects), record["noise"])
-    recorded = record["score"]
-    if not (trace.score == recorded or math.isclose(trace.score, recorded, rel_tol=1e-9,
-                                                   abs_tol=1e-6)):
+    objects = tuple(make_object(model, model.object_class(o["class"]), o["params"])
+                    for o in record["objects"])
+    fresh = sampler.make_trace(objects, record["noise"])  # renders it again
+    stats = {(int(f), str(k)): _decode(s) for f, k, s in record["stats"]}
+    log_likelihood = sampler.scorer.log_likelihood(stats, fresh.noise)
+    recorded = fresh.log_prior + log_likelihood
+    if not (fresh.score == recorded or math.isclose(fresh.score, recorded, rel_tol=1e-4,
+                                                   abs_tol=1e-3)):
         raise RunError(
-            f"the checkpoint's scene scores {trace.score!r} now but {recorded!r} when it was "
+            f"the checkpoint's scene scores {fresh.score!r} now but {recorded!r} when it was "
             "saved: the model, the observations or the renderer differ from the run's",
             path=path, hint="resume with the same model and observations, or start a new run",
         )
-    return trace
+    return Trace(model, objects, fresh.noise, stats, fresh.log_prior, log_likelihood,
+                 fresh.renders)
 
 
 # -- files ---------------------------------------------------------------------------------------
