@@ -24,11 +24,17 @@ class MoveStats:
     """Proposed and accepted counts per (move type, class or sensor)."""
 
     counts: dict[tuple[str, str], list[int]] = field(default_factory=lambda: defaultdict(lambda: [0, 0]))
+    # Proposals rejected because their acceptance ratio was NaN (see ``Sampler.step``).
+    nan: dict[tuple[str, str], int] = field(default_factory=lambda: defaultdict(int))
 
     def record(self, move: str, label: str, accepted: bool) -> None:
         c = self.counts[(move, label)]
         c[0] += 1
         c[1] += int(accepted)
+
+    def record_nan(self, move: str, label: str) -> None:
+        self.record(move, label, False)
+        self.nan[(move, label)] += 1
 
     def by_move(self) -> dict[str, tuple[int, int]]:
         out: dict[str, list[int]] = defaultdict(lambda: [0, 0])
@@ -38,7 +44,21 @@ class MoveStats:
         return {m: (n, a) for m, (n, a) in out.items()}
 
     def as_dict(self) -> dict:
-        return {f"{m}/{lab}": {"proposed": n, "accepted": a} for (m, lab), (n, a) in self.counts.items()}
+        return {
+            f"{m}/{lab}": {"proposed": n, "accepted": a,
+                           **({"nan": self.nan[(m, lab)]} if self.nan.get((m, lab)) else {})}
+            for (m, lab), (n, a) in self.counts.items()
+        }
+
+
+def accept(log_alpha: float, rng: np.random.Generator) -> bool:
+    """The Metropolis-Hastings decision in log space: accept with probability
+    min(1, exp(log_alpha)), comparing log u with log_alpha, so that ratios far beyond the
+    range of a double still decide correctly. ``log_alpha`` is never NaN here."""
+    if log_alpha >= 0.0:
+        return True
+    u = rng.random()
+    return (math.log(u) if u > 0.0 else -math.inf) < log_alpha
 
 
 class Sampler:
@@ -99,14 +119,25 @@ class Sampler:
         )
 
     def step(self, trace: Trace, proposal: moves.Proposal | None) -> Trace:
-        """Metropolis-Hastings accept/reject, in log space; NaN is never accepted."""
+        """Metropolis-Hastings accept/reject, in log space.
+
+        A NaN ratio (a likelihood or proposal density that broke down on a degenerate scene,
+        or two states that both have zero density) says nothing about the target: the
+        proposal is rejected, so the chain only ever holds states with a number for a
+        score, and it is counted (``stats.nan``, "nan" in the summary), so a user sees it.
+        """
         if proposal is None:
             return trace
         new = self.evaluate(trace, proposal)
-        accepted = False
-        if new is not None:
+        if new is None:
+            self.stats.record(proposal.move, proposal.label, False)
+            return trace
+        with np.errstate(invalid="ignore"):  # inf - inf is NaN, handled just below
             log_alpha = self.log_alpha(trace, proposal, new)
-            accepted = bool(log_alpha >= 0.0 or math.log(self.rng.random()) < log_alpha)
+        if math.isnan(log_alpha):
+            self.stats.record_nan(proposal.move, proposal.label)
+            return trace
+        accepted = accept(log_alpha, self.rng)
         self.stats.record(proposal.move, proposal.label, accepted)
         return new if accepted else trace
 

@@ -55,7 +55,8 @@ def capture(sampler, trace: Trace, step: int, best: Trace, best_step: int,
         "trace": _trace_record(trace),
         "best": {"step": best_step, **_trace_record(best)},
         "rng": sampler.rng.bit_generator.state,
-        "moves": [[m, label, n, a] for (m, label), (n, a) in sampler.stats.counts.items()],
+        "moves": [[m, label, n, a, sampler.stats.nan.get((m, label), 0)]
+                  for (m, label), (n, a) in sampler.stats.counts.items()],
         "sampler": _sampler_state(sampler),
     }
 
@@ -64,8 +65,10 @@ def restore(sampler, state: dict[str, Any], path: Path) -> ChainState:
     """Put ``sampler`` back in the state ``capture`` recorded; return the chain's traces."""
     try:
         sampler.rng.bit_generator.state = state["rng"]
-        for m, label, n, a in state["moves"]:
+        for m, label, n, a, nan in state["moves"]:
             sampler.stats.counts[(m, label)] = [int(n), int(a)]
+            if nan:
+                sampler.stats.nan[(m, label)] = int(nan)
         _load_sampler_state(sampler, state.get("sampler"))
         trace = _trace(sampler, state["trace"], path)
         best = _trace(sampler, state["best"], path)

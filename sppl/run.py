@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import signal
 import threading
 import time
@@ -136,6 +137,11 @@ def run_chain(
         start, seconds_before = restored.step, restored.seconds
     else:
         trace = sampler.initial_trace()
+        if math.isnan(trace.score):
+            # Every ratio from this state would be NaN, and so rejected: the chain could not move.
+            raise RunError("the starting scene's log joint is NaN: a sensor likelihood gave NaN "
+                           "for the observations", path=observations.root,
+                           hint="check the observations and the likelihoods the model names")
         best, best_step, start, seconds_before = trace, 0, 0, 0.0
     # A resumed chain draws the samples after its checkpoint again; a new one starts empty.
     truncate_samples(out / "samples.jsonl", start)
@@ -398,6 +404,8 @@ def combine_chains(out: Path, *, seconds: float | None = None,
             m = moves.setdefault(key, {"proposed": 0, "accepted": 0})
             m["proposed"] += c["proposed"]
             m["accepted"] += c["accepted"]
+            if c.get("nan"):
+                m["nan"] = m.get("nan", 0) + c["nan"]
     summary = summarise(
         samples,
         list(summaries[0]["class_counts"]),

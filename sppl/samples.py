@@ -123,9 +123,10 @@ def summarise(
     by_move: dict[str, list[int]] = {}
     for key, c in move_stats.items():
         move = key.split("/")[0]
-        acc = by_move.setdefault(move, [0, 0])
+        acc = by_move.setdefault(move, [0, 0, 0])
         acc[0] += c["proposed"]
         acc[1] += c["accepted"]
+        acc[2] += c.get("nan", 0)  # rejected because their ratio was NaN
     return {
         **(extra or {}),
         "samples_used": n,
@@ -135,8 +136,9 @@ def summarise(
         "class_counts": {c: {str(k): v / n for k, v in d.items()} for c, d in per_class.items()},
         "class_sets": {k: v / n for k, v in configs.most_common(10)} if n else {},
         "acceptance": {
-            m: {"proposed": a, "accepted": b, "rate": (b / a if a else math.nan)}
-            for m, (a, b) in sorted(by_move.items())
+            m: {"proposed": a, "accepted": b, "rate": (b / a if a else math.nan),
+                **({"nan": nan} if nan else {})}
+            for m, (a, b, nan) in sorted(by_move.items())
         },
         "acceptance_by_class": move_stats,
         "noise": noise_summary,
@@ -175,7 +177,8 @@ def format_summary(summary: dict[str, Any]) -> str:
     lines.append(
         "acceptance: "
         + ", ".join(
-            f"{m}: {a['rate']:.3f} ({a['accepted']}/{a['proposed']})"
+            f"{m}: {a['rate']:.3f} ({a['accepted']}/{a['proposed']}"
+            + (f", {a['nan']} NaN" if a.get("nan") else "") + ")"
             for m, a in summary["acceptance"].items()
         )
     )
