@@ -12,7 +12,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 FIGURES = {
-    "single_object/experiment.py": ["single_object_views.png", "single_object_ambiguity.png",
+    "single_object/experiment.py": ["single_object_views.png", "single_object_traces.png",
+                                    "single_object_ambiguity.png",
                                     "single_object_acceptance.png"],
     "occlusion/experiment.py": ["occlusion_views.png", "occlusion_occupancy.png"],
     "fusion/experiment.py": ["fusion_occupancy.png", "fusion_cameras.png"],

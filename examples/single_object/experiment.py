@@ -3,14 +3,16 @@
     python examples/single_object/experiment.py            # about 4 minutes on two CPU cores
     python examples/single_object/experiment.py --quick    # a smoke test: a few hundred sweeps
 
-The thesis's first experiment: a red cube seen by a single RGB camera (64x64 pixels). The
-script simulates the observation (examples/single_object/cameras.json and scene.json), samples
-the posterior with the full three-class model (models/shapes.scn, with smaller random-walk
-steps: fine.scn), prints the MAP scene against
-the truth, how the posterior spreads along and across the camera's line of sight, and the
-acceptance rate of each move, and writes three figures to docs/images/:
-single_object_views.png (observation, MAP render, residual), single_object_ambiguity.png
-(size against distance along the viewing ray) and single_object_acceptance.png.
+The thesis's first experiment: a red cube seen by a single RGB camera (32x32 pixels, low and
+looking almost level, so that where the cube stands on the ground says little about how far
+away it is). The script simulates the observation (examples/single_object/cameras.json and
+scene.json), samples the posterior with the full three-class model (models/shapes.scn, with
+smaller random-walk steps: fine.scn), prints the MAP scene against the truth, how the
+posterior spreads along and across the camera's line of sight, and the acceptance rate of each
+move, and writes four figures to docs/images/: single_object_views.png (observation, MAP
+render, residual), single_object_traces.png (the chains' log joint, number of objects and
+noise scale, sweep by sweep), single_object_ambiguity.png (size against distance along the
+viewing ray) and single_object_acceptance.png.
 See docs/single_object.md.
 """
 
@@ -129,9 +131,10 @@ def main(argv=None) -> int:
     args.images.mkdir(parents=True, exist_ok=True)
     shutil.copy(page.parent / "camera_rgb.png", args.images / "single_object_views.png")
     shutil.copy(page.parent / "acceptance.png", args.images / "single_object_acceptance.png")
+    shutil.copy(page.parent / "traces.png", args.images / "single_object_traces.png")
     ambiguity_figure(args.images / "single_object_ambiguity.png", chains, d_true, true_obj)
     print(f"report: {page}")
-    print(f"figures: {args.images}/single_object_{{views,ambiguity,acceptance}}.png")
+    print(f"figures: {args.images}/single_object_{{views,traces,ambiguity,acceptance}}.png")
     return 0
 
 
@@ -191,7 +194,7 @@ def ambiguity_figure(path, chains, d_true, true_obj) -> None:
     ax0.set_xlabel("distance from the camera along its ray (m)")
     ax0.set_ylabel("cube side s (m)")
     ax0.set_title("chains in the main mode", fontsize=10)
-    ax0.legend(fontsize=7, frameon=False, markerscale=3)
+    _legend(ax0)
     for c in chains:
         if len(c["d"]):
             ax1.scatter(c["lateral"], c["d"], s=3, alpha=0.3, color=CHAIN_COLOURS[c["index"]],
@@ -201,8 +204,17 @@ def ambiguity_figure(path, chains, d_true, true_obj) -> None:
     ax1.set_xlabel("across the ray (m)")
     ax1.set_ylabel("along the ray (m)")
     ax1.set_title("every chain: the cube's centre from above (MAP log joint)", fontsize=10)
-    ax1.legend(fontsize=7, frameon=False, markerscale=3)
+    _legend(ax1)
     fig.savefig(path, dpi=80)
+
+
+def _legend(ax) -> None:
+    """A legend whose scatter dots are big enough to see the colour (the star stays as is)."""
+    legend = ax.legend(fontsize=7, frameon=False)
+    for handle in legend.legend_handles:
+        if hasattr(handle, "set_sizes"):
+            handle.set_sizes([16])
+            handle.set_alpha(1)
 
 
 if __name__ == "__main__":
