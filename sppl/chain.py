@@ -112,7 +112,8 @@ class Sampler:
         if proposal.move == "noise":
             stats, renders = trace.stats, trace.renders
         else:
-            stats, renders = self.scorer.evaluate(proposal.objects)
+            # Given the current trace, the scorer re-renders only what the move changed.
+            stats, renders = self.scorer.evaluate(proposal.objects, parent=trace)
         log_lik = self.scorer.log_likelihood(stats, proposal.noise)
         return Trace(
             self.model, proposal.objects, proposal.noise, stats, log_prior, log_lik, renders

@@ -78,6 +78,20 @@ class Gaussian:
         return rendered + noise["sigma"] * eps
 
 
+# The statistics that ``sppl.render.pixels`` computes on the GL side, keyed by the
+# ``statistics`` function they equal: "squared_residual" is (number of valid values, sum of
+# squared residuals over them). Keyed by the function, not by the likelihood class, so that a
+# subclass that redefines ``statistics`` falls back to the reference path, while one that
+# changes only ``log_prob`` (a Student-t on the same residuals, say) keeps the fast path.
+_GPU_STATISTICS: dict[Callable, str] = {Gaussian.statistics: "squared_residual"}
+
+
+def gpu_statistics(likelihood: Likelihood) -> str | None:
+    """Which GL-side computation gives this likelihood's statistics, or None if none does
+    (then scoring reads the renders back and calls ``statistics``)."""
+    return _GPU_STATISTICS.get(getattr(type(likelihood), "statistics", None))
+
+
 _BUILTIN: dict[str, Callable[..., Likelihood]] = {"gaussian": Gaussian}
 _registry: dict[str, Callable[..., Likelihood]] = dict(_BUILTIN)
 _plugins_loaded = False

@@ -4,6 +4,14 @@ Analysis by synthesis (thesis 3.3): each frame is rendered once per hypothesis, 
 depth together, and each of the frame's modalities that the model has a sensor for is reduced to
 its likelihood's sufficient statistics. The statistics are cached on the trace, so the noise
 moves re-score without rendering.
+
+Two paths compute the same statistics. ``ReferenceScorer`` reads every camera's images back and
+calls the likelihood's ``statistics`` in numpy: slow and obviously right. ``Scorer`` computes the
+per-pixel terms on the GL side (``sppl.render.pixels``) for every likelihood that has a GL-side
+version (``likelihoods.gpu_statistics``), and given the trace a proposal comes from it re-renders
+only the pixels the changed objects covered before or cover now. It falls back to the
+reference path for any other likelihood, and for renderers that are not ``Renderer``. The
+images themselves are then rendered only when something asks for them (``Renders``).
 """
 
 from __future__ import annotations
@@ -16,9 +24,10 @@ import numpy as np
 
 from .camera import Camera
 from .errors import ObservationError
-from .likelihoods import Likelihood, get_likelihood
+from .likelihoods import Likelihood, get_likelihood, gpu_statistics
 from .model import Model
 from .observations import Observations
+from .render.bounds import CameraBounds, union
 
 log = logging.getLogger(__name__)
 
@@ -38,8 +47,9 @@ class Term:
     likelihood: Likelihood
 
 
-class Scorer:
-    """Turns a set of objects into per-term likelihood statistics, and those into a log density."""
+class ReferenceScorer:
+    """Turns a set of objects into per-term likelihood statistics, and those into a log density,
+    by reading every render back and scoring it in numpy: the oracle of the fast path."""
 
     def __init__(self, model: Model, observations: Observations, renderer) -> None:
         self.model = model
@@ -69,11 +79,12 @@ class Scorer:
         self.terms = terms
         self.cameras = {t.frame: t.camera for t in terms}
 
-    def evaluate(self, objects):
+    def evaluate(self, objects, parent=None):
         """Render the objects for every camera; return the likelihood statistics of every term
-        and the renders, as (stats, {frame: (rgb, depth)})."""
-        parts = [*self.model.static_parts, *(p for o in objects for p in o.parts)]
-        rendered = {f: self.renderer.render(parts, cam) for f, cam in self.cameras.items()}
+        and the renders, as (stats, {frame: (rgb, depth)}). ``parent``, the trace the objects
+        were proposed from, lets a fast scorer work incrementally; this one ignores it."""
+        parts = self.parts(objects)
+        rendered = self.render(parts)
         stats = {
             (t.frame, t.kind): t.likelihood.statistics(
                 t.observed, rendered[t.frame][_OUTPUT[t.kind]], t.valid
@@ -84,6 +95,14 @@ class Scorer:
 
     def statistics(self, objects) -> dict[tuple[int, str], np.ndarray]:
         return self.evaluate(objects)[0]
+
+    def parts(self, objects) -> list:
+        """What a hypothesis draws: the static scenery, then each object's parts in order."""
+        return [*self.model.static_parts, *(p for o in objects for p in o.parts)]
+
+    def render(self, parts) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """{frame: (rgb, depth)} of these parts for every camera that has a term."""
+        return {f: self.renderer.render(parts, cam) for f, cam in self.cameras.items()}
 
     def rendered(self, renders, term: Term) -> np.ndarray:
         """The rendered array a term compares with its observation."""
@@ -97,6 +116,173 @@ class Scorer:
         )
 
 
+class Renders(Mapping):
+    """A hypothesis's renders, {frame: (rgb, depth)}, made the first time they are asked for.
+
+    The fast path never reads images back; data-driven births, which look at what a state
+    leaves unexplained, do, and for the states they are asked of only. ``pixels`` is the
+    fast path's record of the hypothesis's per-pixel terms, for incremental scoring.
+    """
+
+    def __init__(self, scorer: ReferenceScorer, parts, pixels: _Pixels | None = None) -> None:
+        self.scorer, self.parts, self.pixels = scorer, parts, pixels
+        self._renders: dict | None = None
+
+    def _all(self) -> dict:
+        if self._renders is None:
+            self._renders = ReferenceScorer.render(self.scorer, self.parts)
+        return self._renders
+
+    def __getitem__(self, frame):
+        return self._all()[frame]
+
+    def __iter__(self):
+        return iter(self.scorer.cameras)
+
+    def __len__(self) -> int:
+        return len(self.scorer.cameras)
+
+
+class _Pixels:
+    """The per-pixel terms of one hypothesis (per camera, as ``PixelScorer`` reads them back)
+    and their float64 sums (cameras, 2). A hypothesis scored incrementally stores only its
+    parent's record and the rectangles it re-rendered; its own arrays are made when it
+    becomes a parent in turn, so a rejected proposal costs no copy."""
+
+    __slots__ = ("images", "parent", "patches", "sums")
+
+    def __init__(self, sums, images=None, parent=None, patches=()) -> None:
+        self.sums, self.images, self.parent, self.patches = sums, images, parent, patches
+
+    def materialise(self) -> list[np.ndarray]:
+        if self.images is None:
+            images = list(self.parent.materialise())
+            for c, (r0, r1, c0, c1), patch in self.patches:  # at most one per camera
+                images[c] = images[c].copy()
+                images[c][r0:r1, c0:c1] = patch
+            self.images, self.parent, self.patches = images, None, ()
+        return self.images
+
+
+# Past this fraction of the atlas's pixels, a full render is cheaper than regions.
+_INCREMENTAL_AREA = 0.6
+
+
+def _total(terms: np.ndarray) -> np.ndarray:
+    """Float64 sums of the two channels of a (rows, cols, 2) block of terms."""
+    return terms.reshape(-1, 2).astype(np.float64).sum(axis=0)
+
+
+class Scorer(ReferenceScorer):
+    """The fast path: per-pixel terms and their sums computed on the GL side, incrementally
+    where a proposal changes a few objects. Same statistics as ``ReferenceScorer`` (to float32
+    rounding in the per-pixel terms; the sums are float64)."""
+
+    def __init__(self, model: Model, observations: Observations, renderer, fast: bool = True):
+        super().__init__(model, observations, renderer)
+        self.pixels = None
+        from .render import Renderer
+
+        if not fast or not isinstance(renderer, Renderer):
+            return
+        slow = sorted({t.kind for t in self.terms if gpu_statistics(t.likelihood) is None})
+        if slow:
+            log.info("the %s likelihood has no GL-side statistics: scoring reads renders back",
+                     ", ".join(slow))
+            return
+        from .render.drawlist import DrawCache
+        from .render.pixels import PixelScorer
+
+        self.frames = sorted(self.cameras)
+        index = {f: i for i, f in enumerate(self.frames)}
+        observed = {f: [None, None] for f in self.frames}
+        self._constant = {}  # (frame, kind) -> (n, sum of squares against the empty scene)
+        background = np.asarray(renderer.settings.background, dtype="f4")
+        for t in self.terms:
+            if t.kind == "image":
+                observed[t.frame][0] = t.observed
+                r = (t.observed - background).astype(np.float64)
+                self._constant[(t.frame, t.kind)] = (t.observed.size, float(np.sum(r * r)))
+            else:
+                valid = np.ones(t.observed.shape, bool) if t.valid is None else t.valid
+                observed[t.frame][1] = np.where(valid, t.observed, np.nan)
+                r = (t.observed[valid] - np.float32(t.camera.depth_max)).astype(np.float64)
+                self._constant[(t.frame, t.kind)] = (int(valid.sum()), float(np.sum(r * r)))
+        self._slot = {(t.frame, t.kind): (index[t.frame], 0 if t.kind == "image" else 1)
+                      for t in self.terms}
+        self.pixels = PixelScorer(renderer.settings, [self.cameras[f] for f in self.frames],
+                                  [observed[f] for f in self.frames])
+        self.draws = DrawCache([CameraBounds(self.cameras[f]) for f in self.frames])
+        static = model.static_parts
+        self._static = [self.draws.of_parts(static)] if static else []
+        self._area = sum(c.width * c.height for c in self.cameras.values())
+        self._token = object()
+
+    def evaluate(self, objects, parent=None):
+        if self.pixels is None:
+            return super().evaluate(objects)
+        parts = self.parts(objects)
+        before = getattr(parent, "renders", None)
+        if isinstance(before, Renders) and before.scorer is self and before.pixels is not None:
+            pixels = self._incremental(parent.objects, objects, before.pixels)
+            if pixels is not None:
+                return self._stats(pixels.sums), Renders(self, parts, pixels)
+        return self.evaluate_many([objects])[0]
+
+    def evaluate_many(self, hypotheses):
+        """``evaluate`` for several object sets at once, all drawn before one read-back."""
+        if self.pixels is None:
+            return [super().evaluate(objects) for objects in hypotheses]
+        images = self.pixels.render([self._drawn(objects) for objects in hypotheses])
+        sums = np.stack([self.pixels.sums(c, im) for c, im in enumerate(images)], axis=1)
+        out = []
+        for b, objects in enumerate(hypotheses):
+            pixels = _Pixels(sums[b], [im[b] for im in images])
+            out.append((self._stats(sums[b]), Renders(self, self.parts(objects), pixels)))
+        return out
+
+    # -- helpers -------------------------------------------------------------------------------
+
+    def _drawn(self, objects) -> list:
+        return [*self._static, *(self.draws.of_object(o) for o in objects)]
+
+    def _stats(self, sums: np.ndarray) -> dict[tuple[int, str], np.ndarray]:
+        stats = {}
+        for key, (c, k) in self._slot.items():
+            n, empty = self._constant[key]
+            stats[key] = np.array([n, max(empty + float(sums[c, k]), 0.0)])
+        return stats
+
+    def _incremental(self, old_objects, objects, before: _Pixels) -> _Pixels | None:
+        """The new hypothesis's record from its parent's, re-rendering only the rectangles
+        the changed objects cover before or after; None when a full render is cheaper."""
+        old_ids, new_ids = {id(o) for o in old_objects}, {id(o) for o in objects}
+        changed = [o for o in old_objects if id(o) not in new_ids]
+        changed += [o for o in objects if id(o) not in old_ids]
+        if not changed:
+            return before
+        rects = [None] * len(self.frames)
+        for o in changed:
+            rects = [union(r, s) for r, s in zip(rects, self.draws.of_object(o).rects)]
+        area = sum((r[1] - r[0]) * (r[3] - r[2]) for r in rects if r is not None)
+        if area > _INCREMENTAL_AREA * self._area:
+            return None
+        if area == 0:
+            return before  # no camera sees the change
+        images = before.materialise()
+        patches = self.pixels.render_regions(self._drawn(objects), rects)
+        sums = before.sums.copy()
+        kept = []
+        for c, (rect, patch) in enumerate(zip(rects, patches)):
+            if patch is None:
+                continue
+            r0, r1, c0, c1 = rect
+            old = images[c][r0:r1, c0:c1]
+            sums[c] += _total(patch) - _total(old)
+            kept.append((c, rect, patch))
+        return _Pixels(sums, parent=before, patches=tuple(kept))
+
+
 class PriorScorer:
     """A scorer with no observations: the chain then targets the prior, which is how the
     sampler is verified (prior recovery) and how ``sppl verify`` checks a user's model."""
@@ -104,7 +290,7 @@ class PriorScorer:
     terms: list[Term] = []
     cameras: dict = {}
 
-    def evaluate(self, objects):
+    def evaluate(self, objects, parent=None):
         return {}, {}
 
     def statistics(self, objects) -> dict[tuple[int, str], np.ndarray]:

@@ -18,6 +18,7 @@ from ..camera import Camera
 from ..errors import RenderError
 from ..geometry import MESH_PREFIX, PRIMITIVES, Part, unit_mesh
 from ..model import RenderSettings
+from .bounds import closed, contains
 from .context import gl_context
 
 # GL's window origin is the bottom-left corner and images' is the top-left: flipping y in clip
@@ -117,8 +118,20 @@ class Renderer:
         self._projection.write(_column_major(FLIP_Y @ camera.projection()))
         self._ray_depth.value = camera.depth_type == "ray"
         self._depth_max.value = float(camera.depth_max)
+        parts = list(parts)
+        # Back faces of closed parts are hidden behind their front faces, so they are not
+        # drawn (unless the camera may be inside a part). Drawing them anyway let a few
+        # silhouette pixels show a back face's shade. The fast path (pixels.py) follows the
+        # same rule, pixel for pixel. The projection's y flip makes front faces clockwise.
+        cull = not any(contains(p, camera.position) for p in parts)
+        self.ctx.front_face = "cw"
         for part in parts:
+            if cull and closed(part.primitive):
+                self.ctx.enable(moderngl.CULL_FACE)
+            else:
+                self.ctx.disable(moderngl.CULL_FACE)
             self._draw(part)
+        self.ctx.front_face = "ccw"
 
         h, w = camera.height, camera.width
         rgb = np.empty((h, w, 3), dtype="f4")

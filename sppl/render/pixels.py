@@ -1,0 +1,288 @@
+"""Likelihood terms computed where the pixels are: on the GL side.
+
+The fast path of ``sppl.scoring``. Each camera's observation is uploaded once as an RGBA float
+texture (RGB, and depth in alpha); a hypothesis is drawn with a fragment shader that writes
+each pixel's squared-residual terms instead of its colour (``shaders/terms.frag``), every part
+of a primitive in one instanced draw. The read-back is two floats a pixel and the CPU only sums
+them, in float64, so that float32 on the GPU costs nothing in accuracy. Several hypotheses are
+drawn before anything is read back, so the rasteriser works on one while the next is set up.
+
+Every camera draws into its own framebuffer with the viewport at the origin, exactly as
+``Renderer`` does: an offset viewport (tiles of one big framebuffer) changes the rounding of
+window coordinates, and thin triangles then cover different pixels. With the same arithmetic
+and the same culling the terms are those of the reference path's read-back images, pixel for
+pixel (the tests hold the two to 1e-4).
+
+Rendering a region only (a scissor rectangle per camera) is what incremental scoring uses: the
+pixels there come out exactly as in a full render, since everything that can reach them is
+still drawn.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import moderngl
+import numpy as np
+
+from ..camera import Camera
+from ..errors import RenderError
+from ..geometry import Part
+from ..model import RenderSettings
+from .bounds import Rect, closed, meets
+from .context import gl_context
+from .renderer import FLIP_Y, _column_major, _shader, flat_vertices
+
+if TYPE_CHECKING:
+    from .drawlist import Drawn
+
+# Floats per instance: model matrix (16), normal matrix (9), colour (3), all column-major.
+INSTANCE_FLOATS = 28
+INSTANCE_FORMAT = "16f 9f 3f/i"
+MISSING = -1.0  # an observed value that marks "no term here" (observations are never negative)
+# Hypotheses drawn before one read-back, at most (``render`` takes any number).
+MAX_BATCH = 64
+
+
+def instance_rows(parts: Sequence[Part]) -> dict[str, np.ndarray]:
+    """Per primitive, the instance rows of its parts, in the parts' order. Parts whose matrix
+    is singular are left out, as ``Renderer`` leaves them out (they enclose nothing)."""
+    groups: dict[str, list[Part]] = {}
+    for part in parts:
+        groups.setdefault(part.primitive, []).append(part)
+    out = {}
+    for primitive, group in groups.items():
+        matrices = np.array([p.matrix for p in group], dtype=float)
+        linear = matrices[:, :3, :3]
+        try:
+            inverse = np.linalg.inv(linear)
+        except np.linalg.LinAlgError:
+            keep = [i for i, m in enumerate(linear) if np.linalg.matrix_rank(m) == 3]
+            if not keep:
+                continue
+            group, matrices, linear = [group[i] for i in keep], matrices[keep], linear[keep]
+            inverse = np.linalg.inv(linear)
+        rows = np.empty((len(group), INSTANCE_FLOATS), dtype="f4")
+        rows[:, :16] = matrices.transpose(0, 2, 1).reshape(-1, 16)  # column-major model
+        rows[:, 16:25] = inverse.reshape(-1, 9)  # inverse's rows = inverse-transpose's columns
+        rows[:, 25:] = [p.colour for p in group]
+        out[primitive] = rows
+    return out
+
+
+class _Slot:
+    """One tile's instance buffers, one per primitive, with their vertex arrays: each tile
+    has its own, so that no buffer is rewritten while a pass that reads it is pending."""
+
+    def __init__(self) -> None:
+        self.buffers: dict[str, moderngl.Buffer] = {}
+        self.vaos: dict[str, moderngl.VertexArray] = {}
+
+
+class PixelScorer:
+    """Draws hypotheses into per-pixel squared-residual terms for a fixed set of cameras.
+
+    ``observed[i]`` is camera i's (rgb or None, depth or None): depth with NaN where it is
+    masked out. The terms at a pixel are (image, depth): the squared residual of that modality
+    minus the squared residual against the empty scene's render (background colour, depth_max).
+    """
+
+    def __init__(self, settings: RenderSettings, cameras: Sequence[Camera], observed) -> None:
+        self.ctx = ctx = gl_context()
+        self.cameras = list(cameras)
+        try:
+            self.program = ctx.program(vertex_shader=_shader("terms.vert"),
+                                       fragment_shader=_shader("terms.frag"))
+        except moderngl.Error as error:
+            raise RenderError(f"the scoring shaders did not compile on this GL driver: {error}")
+        light = np.asarray(settings.light, dtype=float)
+        self.program["light"].value = tuple(light / np.linalg.norm(light))
+        self.program["ambient"].value = float(settings.ambient)
+        self.program["background"].value = tuple(float(c) for c in settings.background)
+        self.program["observed"].value = 0
+        self._uniforms = {n: self.program[n] for n in ("view", "projection", "ray_depth",
+                                                        "depth_max")}
+        self._meshes = {}
+        limit = ctx.info["GL_MAX_TEXTURE_SIZE"]
+        self.observed = []
+        for camera, (rgb, depth) in zip(self.cameras, observed):
+            if max(camera.width, camera.height) > limit:
+                raise RenderError(f"cannot render a {camera.width}x{camera.height} image on "
+                                  "this GL driver")
+            texels = np.full((camera.height, camera.width, 4), MISSING, dtype="f4")
+            if rgb is not None:
+                texels[..., :3] = rgb
+            if depth is not None:
+                texels[..., 3] = np.where(np.isfinite(depth), depth, MISSING)
+            texture = ctx.texture((camera.width, camera.height), 4, texels.tobytes(), dtype="f4")
+            texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self.observed.append(texture)
+        # Per camera: the uniform bytes of its pass, computed once.
+        self._camera_uniforms = [
+            (_column_major(c.w2c), _column_major(FLIP_Y @ c.projection()),
+             c.depth_type == "ray", float(c.depth_max)) for c in self.cameras
+        ]
+        # Summing an image's two channels is a product with a 0/1 matrix: in float64 it is
+        # exact to rounding, and far faster than numpy's strided sums.
+        self._pick = []
+        for c in self.cameras:
+            pick = np.zeros((2 * c.width * c.height, 2))
+            pick[0::2, 0] = pick[1::2, 1] = 1.0
+            self._pick.append(pick)
+        self._slots: list[_Slot] = []
+        self._targets: list[list[tuple]] = []  # [hypothesis slot][camera]
+
+    # -- drawing -------------------------------------------------------------------------------
+
+    def render(self, hypotheses: Sequence[Sequence[Drawn]]) -> list[np.ndarray]:
+        """Terms of whole hypotheses, each given as the ``Drawn`` of its static parts and
+        objects in order: per camera an array (len(hypotheses), height, width, 2)."""
+        out = [np.empty((len(hypotheses), c.height, c.width, 2), dtype="f4")
+               for c in self.cameras]
+        for start in range(0, len(hypotheses), MAX_BATCH):
+            batch = hypotheses[start : start + MAX_BATCH]
+            self._begin()
+            for b, drawn in enumerate(batch):
+                for c in range(len(self.cameras)):
+                    fbo = self._target(b, c)
+                    fbo.use()
+                    fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+                    self._draw(b, c, drawn, None)
+            self._end()
+            for b in range(len(batch)):
+                for c in range(len(self.cameras)):
+                    self._target(b, c).read_into(out[c][start + b], components=2, dtype="f4")
+        return out
+
+    def render_regions(self, drawn: Sequence[Drawn], rects: Sequence[Rect | None]):
+        """Terms of one hypothesis inside one rectangle per camera (None: skip that camera);
+        a list of (rows, cols, 2) arrays, or None for the cameras skipped. Only what meets a
+        rectangle is drawn there."""
+        self._begin()
+        for c, rect in enumerate(rects):
+            if rect is not None:
+                fbo = self._target(0, c)
+                fbo.use()
+                fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=_window(rect))
+                self.ctx.scissor = _window(rect)
+                self._draw(0, c, drawn, rect)
+                self.ctx.scissor = None
+        self._end()
+        out = []
+        for c, rect in enumerate(rects):
+            if rect is None:
+                out.append(None)
+                continue
+            patch = np.empty((rect[1] - rect[0], rect[3] - rect[2], 2), dtype="f4")
+            self._target(0, c).read_into(patch, viewport=_window(rect), components=2,
+                                         dtype="f4")
+            out.append(patch)
+        return out
+
+    def sums(self, c: int, images: np.ndarray) -> np.ndarray:
+        """Float64 sums (hypotheses, 2) of camera c's terms, from ``render``'s array."""
+        flat = images.reshape(len(images), -1).astype(np.float64)
+        return flat @ self._pick[c]
+
+    def release(self) -> None:
+        for targets in self._targets:
+            for fbo, objects in targets:
+                fbo.release()
+                for obj in objects:
+                    obj.release()
+        for slot in self._slots:
+            for obj in [*slot.vaos.values(), *slot.buffers.values()]:
+                obj.release()
+        for obj in [*self._meshes.values(), *self.observed]:
+            obj.release()
+        self.program.release()
+        self._targets, self._slots, self._meshes, self.observed = [], [], {}, []
+
+    # -- helpers -------------------------------------------------------------------------------
+
+    def _begin(self) -> None:
+        # The context is shared with ``Renderer``; set every state this pass needs.
+        self.ctx.enable_only(moderngl.DEPTH_TEST)
+        self.ctx.scissor = None
+        # The projection's y flip makes front faces clockwise on the screen.
+        self.ctx.front_face = "cw"
+
+    def _end(self) -> None:
+        self.ctx.front_face = "ccw"
+        self.ctx.disable(moderngl.CULL_FACE)
+
+    def _draw(self, b: int, c: int, drawn: Sequence[Drawn], region: Rect | None) -> None:
+        """Draw camera c's view of ``drawn`` (inside ``region``) into the bound framebuffer."""
+        visible = [d for d in drawn if d.rects[c] is not None
+                   and (region is None or meets(d.rects[c], region))]
+        if not visible:
+            return
+        view, projection, ray, depth_max = self._camera_uniforms[c]
+        u = self._uniforms
+        u["view"].write(view)
+        u["projection"].write(projection)
+        u["ray_depth"].value = ray
+        u["depth_max"].value = depth_max
+        self.observed[c].use(location=0)
+        # Back faces of closed parts are hidden behind their front faces unless the camera
+        # is inside a part: the same rule as Renderer's, so the same pixels.
+        cull = not any(d.inside[c] for d in visible)
+        while len(self._slots) <= b * len(self.cameras) + c:
+            self._slots.append(_Slot())
+        slot = self._slots[b * len(self.cameras) + c]
+        rows: dict[str, list[np.ndarray]] = {}
+        for d in visible:
+            for primitive, r in d.rows.items():
+                rows.setdefault(primitive, []).append(r)
+        for primitive, chunks in rows.items():
+            data = chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
+            vao = self._vao(slot, primitive, data.nbytes)
+            slot.buffers[primitive].write(data)
+            if cull and closed(primitive):
+                self.ctx.enable(moderngl.CULL_FACE)
+            else:
+                self.ctx.disable(moderngl.CULL_FACE)
+            vao.render(moderngl.TRIANGLES, instances=len(data))
+
+    def _vao(self, slot: _Slot, primitive: str, nbytes: int) -> moderngl.VertexArray:
+        buffer = slot.buffers.get(primitive)
+        if buffer is None:
+            buffer = slot.buffers[primitive] = self.ctx.buffer(reserve=max(nbytes, 1024))
+            slot.vaos[primitive] = self.ctx.vertex_array(self.program, [
+                (self._mesh(primitive), "3f 3f", "in_position", "in_normal"),
+                (buffer, INSTANCE_FORMAT, "i_model", "i_normal", "i_colour"),
+            ])
+        elif buffer.size < nbytes:
+            buffer.orphan(2 * nbytes)
+        return slot.vaos[primitive]
+
+    def _mesh(self, primitive: str) -> moderngl.Buffer:
+        vbo = self._meshes.get(primitive)
+        if vbo is None:
+            try:
+                vertices = flat_vertices(primitive)
+            except (KeyError, ValueError) as error:
+                raise RenderError(f"cannot draw the primitive {primitive!r}: {error}")
+            vbo = self._meshes[primitive] = self.ctx.buffer(vertices.tobytes())
+        return vbo
+
+    def _target(self, b: int, c: int) -> moderngl.Framebuffer:
+        """Hypothesis slot b's framebuffer for camera c, made once."""
+        while len(self._targets) <= b:
+            self._targets.append([])
+        targets = self._targets[b]
+        while len(targets) <= c:
+            camera = self.cameras[len(targets)]
+            size = (camera.width, camera.height)
+            terms = self.ctx.texture(size, 2, dtype="f4")
+            visibility = self.ctx.depth_renderbuffer(size)
+            targets.append((self.ctx.framebuffer([terms], visibility), (terms, visibility)))
+        return targets[c][0]
+
+
+def _window(rect: Rect) -> tuple[int, int, int, int]:
+    """A rectangle of an image (rows r0..r1, columns c0..c1) in window coordinates. With the
+    projection's y flip, window row = image row."""
+    r0, r1, c0, c1 = rect
+    return (c0, r0, c1 - c0, r1 - r0)

@@ -1,0 +1,39 @@
+#version 330
+
+// Shades a fragment as scene.frag does, then writes its pixel's likelihood term instead of its
+// colour: for each modality, (observed - rendered)^2 minus (observed - background)^2. Pixels no
+// part covers keep the cleared 0, so the image's sum is the sum of squared residuals less that
+// of the empty scene, which is computed once on the CPU.
+uniform vec3 light;
+uniform float ambient;
+uniform bool ray_depth;
+uniform float depth_max;
+uniform vec3 background;
+uniform sampler2D observed;  // rgb (r < 0: no RGB term), depth in alpha (< 0: masked out)
+
+in vec3 v_normal;
+in vec3 v_camera;
+flat in vec3 v_colour;
+
+layout(location = 0) out vec2 out_terms;  // (image term, depth term)
+
+void main() {
+    float lambert = max(dot(normalize(v_normal), light), 0.0);
+    vec3 colour = v_colour * (ambient + (1.0 - ambient) * lambert);
+    float depth = ray_depth ? length(v_camera) : -v_camera.z;
+    depth = min(depth, depth_max);
+    vec4 o = texelFetch(observed, ivec2(gl_FragCoord.xy), 0);
+    float image = 0.0;
+    if (o.r >= 0.0) {
+        vec3 a = o.rgb - colour;
+        vec3 b = o.rgb - background;
+        image = dot(a, a) - dot(b, b);
+    }
+    float range = 0.0;
+    if (o.a >= 0.0) {
+        float a = o.a - depth;
+        float b = o.a - depth_max;
+        range = a * a - b * b;
+    }
+    out_terms = vec2(image, range);
+}

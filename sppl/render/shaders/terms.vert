@@ -1,0 +1,25 @@
+#version 330
+
+// scene.vert with each part's matrices and colour as per-instance attributes, so that all the
+// parts of one primitive are one draw call. The arithmetic is scene.vert's, in the same order,
+// so that both rasterise the same pixels.
+uniform mat4 view;
+uniform mat4 projection;
+
+in vec3 in_position;
+in vec3 in_normal;
+in mat4 i_model;
+in mat3 i_normal;  // inverse-transpose of i_model's 3x3
+in vec3 i_colour;
+
+out vec3 v_normal;
+out vec3 v_camera;
+flat out vec3 v_colour;
+
+void main() {
+    vec4 camera_point = view * (i_model * vec4(in_position, 1.0));
+    v_normal = i_normal * in_normal;
+    v_camera = camera_point.xyz;
+    v_colour = i_colour;
+    gl_Position = projection * camera_point;
+}

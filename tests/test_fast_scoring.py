@@ -1,0 +1,211 @@
+"""The fast scoring path (GL-side terms, incremental re-rendering) against the reference path
+(full read-back, numpy statistics): every log-likelihood agrees to 1e-4 relative.
+
+The two draw the same triangles with the same arithmetic, so they agree pixel for pixel; what
+is left is float32 rounding in the per-pixel terms, far inside the tolerance. Scenes are drawn
+from the models' priors with fixed seeds, so every run checks the same hypotheses.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from sppl.camera import Camera, focal_from_fov, look_at
+from sppl.chain import Sampler
+from sppl.lang import load_model
+from sppl.likelihoods import Gaussian, gpu_statistics, register_likelihood
+from sppl.model import Sensor
+from sppl.observations import CameraSpec, Observations
+from sppl.render import Renderer
+from sppl.scoring import ReferenceScorer, Renders, Scorer
+from sppl.simulate import render_observations, sample_noise, sample_objects
+from sppl.trace import make_object
+
+REL = 1e-4
+
+
+def _camera(name, width, height, eye, depth_type="z"):
+    f = focal_from_fov(width, 55)
+    return Camera(name, width, height, f, f, width / 2, height / 2,
+                  look_at(eye, (0.0, 0.0, 0.4)), 8.0, depth_type)
+
+
+# Three cameras of different sizes, modalities and depth conventions.
+SPECS = [
+    CameraSpec(_camera("both", 64, 64, (3.0, -2.6, 2.4)), ("rgb", "depth")),
+    CameraSpec(_camera("rgb", 48, 40, (-3.2, -1.6, 2.6)), ("rgb",)),
+    CameraSpec(_camera("depth", 56, 72, (0.5, 3.5, 2.0), "ray"), ("depth",)),
+]
+
+
+def _setting(root, model_name, seed=0):
+    model = load_model(root / "models" / model_name)
+    renderer = Renderer(model.render)
+    rng = np.random.default_rng(seed)
+    truth = sample_objects(model, rng)
+    noise = sample_noise(model, rng)
+    frames = render_observations(model, truth, noise, SPECS, renderer, rng)
+    # Missing depth: a block of pixels and a scatter of single ones, masked out of the terms.
+    for frame in frames:
+        if frame.depth is not None:
+            frame.depth_valid[5:20, 10:30] = False
+            frame.depth_valid[rng.random(frame.depth.shape) < 0.05] = False
+            frame.depth[~frame.depth_valid] = np.nan
+    obs = Observations(root, frames)
+    return model, renderer, obs, truth, noise
+
+
+def _assert_agree(fast_stats, ref_stats, scorer, noise):
+    assert fast_stats.keys() == ref_stats.keys()
+    for key in ref_stats:
+        assert fast_stats[key][0] == ref_stats[key][0]
+        assert fast_stats[key][1] == pytest.approx(ref_stats[key][1], rel=REL, abs=1e-6)
+    fast, ref = scorer.log_likelihood(fast_stats, noise), scorer.log_likelihood(ref_stats, noise)
+    assert fast == pytest.approx(ref, rel=REL)
+
+
+@pytest.fixture(scope="module", params=["shapes.scn", "tabletop.scn"])
+def setting(request, require_gl, root):
+    return _setting(root, request.param)
+
+
+def test_fast_path_is_used_for_gaussian_sensors(setting):
+    model, renderer, obs, _, _ = setting
+    assert Scorer(model, obs, renderer).pixels is not None
+    assert ReferenceScorer(model, obs, renderer).renderer is renderer
+
+
+def test_full_scenes_agree_with_the_reference(setting):
+    model, renderer, obs, truth, noise = setting
+    fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
+    rng = np.random.default_rng(1)
+    scenes = [(), truth] + [sample_objects(model, rng) for _ in range(12)]
+    for objects in scenes:
+        _assert_agree(fast.statistics(objects), ref.statistics(objects), ref, noise)
+
+
+def test_a_batch_agrees_with_the_reference(setting):
+    model, renderer, obs, truth, noise = setting
+    fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
+    rng = np.random.default_rng(2)
+    scenes = [truth] + [sample_objects(model, rng) for _ in range(5)]
+    for (stats, _), objects in zip(fast.evaluate_many(scenes), scenes):
+        _assert_agree(stats, ref.statistics(objects), ref, noise)
+
+
+def test_incremental_scores_equal_full_rescoring_along_a_chain(setting):
+    """A chain whose every move (parameters, birth, death, change, replace) is scored
+    incrementally from its current state; after many moves its cached statistics are those
+    of a full rescore by the reference path."""
+    model, renderer, obs, truth, noise = setting
+    fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
+    sampler = Sampler(model, fast, np.random.default_rng(3))
+    trace = sampler.make_trace(truth, noise)
+    for sweep in range(12):
+        trace = sampler.sweep(trace)
+        assert isinstance(trace.renders, Renders)
+        _assert_agree(trace.stats, ref.statistics(trace.objects), ref, trace.noise)
+    assert sum(n for n, _ in sampler.stats.by_move().values()) > 50
+
+
+def test_incremental_moves_of_one_object_equal_full_rescoring(setting):
+    """Many random single-object moves from one state and from a moving state, each scored
+    from its parent's cached terms."""
+    model, renderer, obs, truth, noise = setting
+    if not truth:
+        pytest.skip("the prior drew an empty scene")
+    fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
+    sampler = Sampler(model, fast, np.random.default_rng(4))
+    rng = np.random.default_rng(5)
+    trace = sampler.make_trace(truth, noise)
+    for i in range(60):
+        k = int(rng.integers(len(trace.objects)))
+        old = trace.objects[k]
+        values = dict(old.values)
+        for p in old.cls.parameters:
+            if p.continuous:
+                values[p.name] += float(rng.normal(0.0, p.proposal_scale))
+        new = make_object(model, old.cls, values)
+        if not math.isfinite(new.log_prior):
+            continue
+        objects = trace.objects[:k] + (new,) + trace.objects[k + 1 :]
+        stats, renders = fast.evaluate(objects, parent=trace)
+        _assert_agree(stats, ref.statistics(objects), ref, noise)
+        if i % 2 == 0:  # move on from the new state half the time: patches on patches
+            trace = sampler.make_trace(objects, noise) if i % 10 == 0 else type(trace)(
+                model, objects, noise, stats, trace.log_prior, 0.0, renders)
+
+
+def test_lazy_renders_are_the_reference_renders(setting):
+    model, renderer, obs, truth, noise = setting
+    fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
+    _, renders = fast.evaluate(truth)
+    _, expected = ref.evaluate(truth)
+    assert sorted(renders) == sorted(expected)
+    for frame in expected:
+        np.testing.assert_array_equal(renders[frame][0], expected[frame][0])
+        np.testing.assert_array_equal(renders[frame][1], expected[frame][1])
+
+
+def test_noise_moves_reuse_the_cached_statistics(setting):
+    model, renderer, obs, truth, noise = setting
+    sampler = Sampler(model, Scorer(model, obs, renderer), np.random.default_rng(6))
+    trace = sampler.make_trace(truth, noise)
+    from sppl import moves
+
+    kind = next(iter(model.sensors))
+    name = model.sensors[kind].noise[0].name
+    proposal = moves.propose_noise(model, trace, kind, name, np.random.default_rng(7))
+    new = sampler.evaluate(trace, proposal)
+    assert new is None or (new.stats is trace.stats and new.renders is trace.renders)
+
+
+def test_a_camera_inside_an_object_sees_its_inside_on_both_paths(require_gl, root):
+    """Back faces are skipped only where no camera can be inside a part."""
+    model, renderer, obs, truth, noise = _setting(root, "shapes.scn")
+    eye = SPECS[0].camera.position
+    sphere = model.object_class("sphere")
+    around = make_object(model, sphere, {"x": float(eye[0]), "y": float(eye[1]),
+                                          "r": float(eye[2]), "c": "red"})
+    fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
+    _assert_agree(fast.statistics((around,)), ref.statistics((around,)), ref, noise)
+    rgb, _ = ref.render(ref.parts((around,)))[0]
+    assert np.all(rgb != np.asarray(model.render.background, "f4"))  # the sphere's inside
+
+
+def test_a_likelihood_without_gl_statistics_falls_back_to_the_reference(require_gl, root):
+    class AbsoluteResidual(Gaussian):
+        """Statistics of its own: the GL side has no version of them."""
+
+        def statistics(self, observed, rendered, valid=None):
+            r = observed - rendered
+            r = r[valid] if valid is not None else r
+            return np.array([r.size, float(np.abs(r).sum())])
+
+    class Heavier(Gaussian):
+        """Only log_prob differs: the Gaussian's statistics, so the fast path serves it."""
+
+        def log_prob(self, stats, noise):
+            return super().log_prob(stats, noise) - 1.0
+
+    register_likelihood("test-absolute", AbsoluteResidual)
+    register_likelihood("test-heavier", Heavier)
+    assert gpu_statistics(AbsoluteResidual()) is None
+    assert gpu_statistics(Heavier()) == "squared_residual"
+    model, renderer, obs, truth, noise = _setting(root, "shapes.scn")
+    for name, fast_path in (("test-absolute", False), ("test-heavier", True)):
+        depth = model.sensors["depth"]
+        sensors = {**model.sensors, "depth": Sensor(depth.kind, name, depth.noise, {})}
+        custom = _replace(model, sensors=sensors)
+        fast, ref = Scorer(custom, obs, renderer), ReferenceScorer(custom, obs, renderer)
+        assert (fast.pixels is not None) == fast_path
+        _assert_agree(fast.statistics(truth), ref.statistics(truth), ref, noise)
+
+
+def _replace(model, **changes):
+    import dataclasses
+
+    return dataclasses.replace(model, **changes)
