@@ -149,7 +149,15 @@ def _prepare_out(out: Path, force: bool) -> None:
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise UsageError(f"{out}: cannot create the output folder ({e.strerror})") from None
+        raise UsageError(f"{out}: cannot create the output folder ({e.strerror}); choose "
+                         "another --out") from None
+    probe = out / ".sppl-write-test"
+    try:  # fail now, not when the first sample is written
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        raise UsageError(f"{out}: cannot write in the output folder ({e.strerror}); choose "
+                         "another --out") from None
 
 
 def cmd_check(args) -> int:

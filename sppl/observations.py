@@ -268,8 +268,28 @@ def _load_frame(r: _FrameReader, names: set[str]) -> Frame:
                 hint="check the file and integer_depth_scale, or drop depth_file_path",
                 path=depth_path,
             )
+        _check_depth_scale(r, raw_depth[valid], camera, depth_path)
         depth = np.where(valid, np.minimum(raw_depth, camera.depth_max), np.nan).astype(np.float32)
     return Frame(camera, rgb, depth, valid, rgb_path, depth_path)
+
+
+def _check_depth_scale(r: _FrameReader, depth: np.ndarray, camera: Camera, path: Path) -> None:
+    """A depth map in the wrong unit is all beyond the camera's range or all in front of its
+    near plane; either way it holds nothing the renderer can match."""
+    scale_hint = ("store float metres in .npy, or integer units of integer_depth_scale metres "
+                  "(default 0.001, millimetres) in a 16-bit PNG")
+    if depth.min() >= camera.depth_max:
+        raise r.error(
+            f"every depth pixel is at or beyond depth_max = {camera.depth_max:g} m (the nearest "
+            f"is {depth.min():.4g}): is the map in millimetres?",
+            hint=f"{scale_hint}; or raise depth_max", path=path,
+        )
+    if depth.max() < camera.near:
+        raise r.error(
+            f"every depth pixel is nearer than near = {camera.near:g} m (the farthest is "
+            f"{depth.max():.3g}): is the map in the wrong unit?",
+            hint=scale_hint, path=path,
+        )
 
 
 def _frame_name(r: _FrameReader, files: list[str], names: set[str]) -> str:
@@ -337,7 +357,7 @@ def _camera(r: _FrameReader, name: str, size: tuple[int, int] | None) -> Camera:
     near = r.number("near", 0.01, positive=True)
     if near >= depth_max:
         raise r.error(f"'near' ({near}) must be smaller than 'depth_max' ({depth_max})")
-    return Camera(
+    camera = Camera(
         name=name,
         width=width,
         height=height,
@@ -350,6 +370,44 @@ def _camera(r: _FrameReader, name: str, size: tuple[int, int] | None) -> Camera:
         depth_type=r.choice("depth_type", DEPTH_TYPES, "z"),
         near=near,
     )
+    _check_principal_point(r, camera)
+    _check_sees_ground(r, camera)
+    return camera
+
+
+def _check_principal_point(r: _FrameReader, cam: Camera) -> None:
+    # Intrinsics written for another resolution (the images were resized, or w and h belong
+    # to another camera) put the principal point off the image.
+    if not (0 <= cam.cx <= cam.width and 0 <= cam.cy <= cam.height):
+        raise r.error(
+            f"principal point (cx, cy) = ({cam.cx:g}, {cam.cy:g}) lies outside the "
+            f"{cam.width}x{cam.height} image",
+            hint="the intrinsics seem to be for another image size: scale fl_x, fl_y, cx, cy "
+            "with the images",
+        )
+
+
+def _check_sees_ground(r: _FrameReader, cam: Camera) -> None:
+    """Every scene sppl samples stands on the ground plane z = 0; a camera that sees none of
+    it almost always has its pose in another convention (y up, OpenCV axes, world-to-camera)
+    rather than pointing at the sky on purpose. (Ground beyond ``depth_max`` still counts: the
+    RGB image shows it, and the depth map holds it clipped.)"""
+    hint = ("sppl's world is z-up with the ground at z = 0, and transform_matrix is "
+            "camera-to-world in OpenGL axes: convert y-up poses, or mark OpenCV ones with "
+            '"camera_convention": "opencv"')
+    height = float(cam.c2w[2, 3])
+    if height <= 0:
+        raise r.error(f"the camera is at height z = {height:.3g} m, not above the ground "
+                      "(z = 0), so it sees none of it", hint=hint)
+    # The ray through pixel (u, v) is R (x, y, -1) with x, y linear in u, v; how steeply it
+    # points down is linear too, so the steepest ray in the image is through a corner.
+    corners = np.array([[0, 0], [cam.width, 0], [0, cam.height], [cam.width, cam.height]])
+    x = (corners[:, 0] - cam.cx) / cam.fx
+    y = -(corners[:, 1] - cam.cy) / cam.fy
+    down = -(cam.c2w[2, :3] @ np.stack([x, y, -np.ones(4)]))
+    if float(down.max()) <= 0:
+        raise r.error("the camera looks entirely above the horizon and sees none of the ground "
+                      "(z = 0)", hint=hint)
 
 
 def _check_pinhole(r: _FrameReader) -> None:
@@ -468,6 +526,13 @@ def _read_rgb(r: _FrameReader, path: Path) -> np.ndarray:
         with Image.open(path) as im:
             rawmode = im.tile[0][3] if len(im.tile) == 1 else None
             im.load()
+            if im.mode in _INTEGER_DEPTH_MODES:
+                raise r.error(
+                    f"image is 16-bit greyscale ({im.mode}), like a depth map, not an RGB image",
+                    hint="give it as depth_file_path, or give an 8- or 16-bit colour image as "
+                    "file_path",
+                    path=path,
+                )
             if im.mode in _GREY_MODES:
                 raise r.error(
                     f"image is greyscale ({im.mode}); an RGB observation needs colour channels",

@@ -178,10 +178,10 @@ def test_width_and_height_default_to_the_image_size(tmp_path):
 
 
 def test_per_frame_intrinsics_win_over_top_level(tmp_path):
-    simple_folder(tmp_path, frame_extra={"fl_x": 20.0, "cy": 3.5, "depth_max": 1.5},
+    simple_folder(tmp_path, frame_extra={"fl_x": 20.0, "cy": 3.5, "depth_max": 2.5},
                   top_extra={"fl_y": 11.0, "cx": 4.5, "cy": 1.0, "depth_max": 8.0})  # fmt: skip
     cam = load_observations(tmp_path).frames[0].camera
-    assert (cam.fx, cam.fy, cam.cx, cam.cy, cam.depth_max) == (20.0, 11.0, 4.5, 3.5, 1.5)
+    assert (cam.fx, cam.fy, cam.cx, cam.cy, cam.depth_max) == (20.0, 11.0, 4.5, 3.5, 2.5)
 
 
 def test_frame_field_of_view_beats_top_level_focal(tmp_path):

@@ -8,6 +8,7 @@ without a GPU, Mesa's llvmpipe provides it.
 from __future__ import annotations
 
 import logging
+import os
 import threading
 
 import moderngl
@@ -37,15 +38,33 @@ def renderer_string() -> str:
     return gl_context().info["GL_RENDERER"]
 
 
+# What each failure of glcontext's EGL backend means, and the Debian package that fixes it.
+# All four packages are needed (each was removed in turn to check): libEGL.so.1 and libGL.so.1
+# are glvnd's dispatchers (libegl1, libgl1), which glcontext loads by name; EGL then needs a
+# vendor library (libegl-mesa0, or a GPU driver's) to find any device, and Mesa's vendor needs
+# its drivers, llvmpipe among them (libgl1-mesa-dri), to initialise one.
+_LIKELY_MISSING = (
+    ("libegl", "libegl1"),
+    ("libgl", "libgl1"),
+    ("found 0 devices", "libegl-mesa0, or the EGL library of the GPU's driver"),
+    ("eglinitialize", "libgl1-mesa-dri"),
+)
+
+
 def _create() -> moderngl.Context:
+    if not log.isEnabledFor(logging.DEBUG):
+        # Mesa prints its own multi-line warnings when it fails; the error below says it all.
+        os.environ.setdefault("EGL_LOG_LEVEL", "fatal")
     try:
         ctx = moderngl.create_context(standalone=True, backend="egl", require=GL_VERSION)
     except Exception as error:  # glcontext raises bare Exceptions whose text is the only clue
         reason = " ".join(str(error).split()) or type(error).__name__
+        likely = next((pkg for clue, pkg in _LIKELY_MISSING if clue in reason.lower()), None)
         raise RenderError(
             f"could not create a headless OpenGL {GL_VERSION // 100}.{GL_VERSION // 10 % 10} "
             f"context through EGL ({reason}); on Debian or Ubuntu install the packages it "
             f"needs with `apt-get install {DEBIAN_PACKAGES}`"
+            + (f" (the one missing here is likely {likely})" if likely else "")
         ) from error
     # Standalone contexts default to gc_mode None, which leaks every GL object not released
     # by hand; "auto" frees them when their Python wrappers are collected.
