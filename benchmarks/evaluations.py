@@ -1,0 +1,232 @@
+"""Likelihood evaluations per second: sppl's fast path against the reference path and the
+thesis's renderer (Panda3D), and the memory floor.
+
+    python benchmarks/evaluations.py              # the full grid: K x cameras x pixels
+    python benchmarks/evaluations.py --quick      # 128x128, 2 cameras, K=3 only
+
+Scenes are the cubes, cones and spheres of models/shapes.scn on a grid, seen by cameras on a
+circle, every camera recording RGB and depth (Gaussian likelihood over every pixel). Paths:
+- reference: render each camera, read colour and depth back, score in numpy (ReferenceScorer);
+- fast: sppl's Scorer, per-pixel terms on the GL side, one whole hypothesis per call;
+- batch: the same, 16 hypotheses drawn before one read-back (Scorer.evaluate_many);
+- panda3d: the thesis's renderer, Panda3D offscreen through EGL, colour and depth read back
+  and scored in numpy (skipped with a message when panda3d cannot be imported);
+- incremental: a single-object parameter move scored from the current state
+  (Scorer.evaluate with the parent trace), against full rescoring by each path.
+The memory floor is the time to read the observation arrays once (a sum over each).
+
+Every figure is the median of --repeats runs of at least --seconds each; the paths run
+interleaved within a repeat, so the ratios compare like with like on a shared machine. The GL
+renderer in use is printed first: on a machine with a GPU the same command gives the GPU figure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import math
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import panda3d_path  # noqa: E402
+
+from sppl.camera import Camera, focal_from_fov, look_at  # noqa: E402
+from sppl.chain import Sampler  # noqa: E402
+from sppl.lang import load_model  # noqa: E402
+from sppl.observations import CameraSpec, Observations  # noqa: E402
+from sppl.render import Renderer, renderer_string  # noqa: E402
+from sppl.scoring import ReferenceScorer, Scorer  # noqa: E402
+from sppl.simulate import render_observations  # noqa: E402
+from sppl.trace import make_object  # noqa: E402
+
+NOISE = {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}}
+BATCH = 16
+MOVES = 32
+
+
+def scene(model, k: int, rng):
+    """k objects (cube, cone, sphere in turn) on a grid 1.2 m apart, centred on the origin."""
+    side = math.ceil(math.sqrt(k))
+    objects = []
+    palette = ("red", "green", "blue")
+    for i in range(k):
+        cls = model.classes[i % 3]
+        x, y = (i % side - (side - 1) / 2) * 1.2, (i // side - (side - 1) / 2) * 1.2
+        values = {"x": x + rng.uniform(-0.1, 0.1), "y": y + rng.uniform(-0.1, 0.1),
+                  "c": palette[i % 3]}
+        for p in cls.parameters:
+            if p.name not in values:
+                values[p.name] = {"a": 0.3, "s": 0.6, "r": 0.35, "h": 0.8}[p.name]
+        objects.append(make_object(model, cls, values))
+    return tuple(objects), side * 1.2
+
+
+def cameras(n: int, size: int, extent: float):
+    f = focal_from_fov(size, 55)
+    radius = 2.0 + 1.3 * extent
+    out = []
+    for i in range(n):
+        angle = 2 * math.pi * i / n + 0.4
+        eye = (radius * math.cos(angle), radius * math.sin(angle), 0.8 * radius)
+        out.append(Camera(f"c{i}", size, size, f, f, size / 2, size / 2,
+                          look_at(eye, (0, 0, 0.3)), depth_max=3 * radius))
+    return out
+
+
+def rate(fn, per_call: int, seconds: float) -> float:
+    """Evaluations per second of one run lasting at least ``seconds``."""
+    calls, start = 0, time.perf_counter()
+    while True:
+        fn()
+        calls += 1
+        elapsed = time.perf_counter() - start
+        if elapsed >= seconds:
+            return calls * per_call / elapsed
+
+
+def measure(paths: dict, repeats: int, seconds: float) -> dict[str, float]:
+    """Median rates; a path given as (None, remote) is measured by ``remote(seconds)``."""
+    for fn, per in paths.values():  # warm up: shaders, buffers, caches
+        for _ in range(3 if fn is not None else 0):
+            fn()
+    runs = {name: [] for name in paths}
+    for _ in range(repeats):
+        for name, (fn, per) in paths.items():
+            runs[name].append(rate(fn, per, seconds) if fn is not None else per(seconds))
+    return {name: statistics.median(r) for name, r in runs.items()}
+
+
+def setting(model, renderer, k, n_cameras, size, rng):
+    objects, extent = scene(model, k, rng)
+    cams = cameras(n_cameras, size, extent)
+    frames = render_observations(model, objects, NOISE, [CameraSpec(c) for c in cams],
+                                 renderer, rng)
+    return objects, cams, Observations(ROOT, frames)
+
+
+def scorers(model, renderer, cams, obs, panda):
+    fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
+    assert fast.pixels is not None
+    if panda is not None:
+        panda.setup(model.render, cams, [(f.rgb, f.depth) for f in obs.frames])
+    return fast, ref
+
+
+def full_paths(model, renderer, objects, cams, obs, panda):
+    fast, ref = scorers(model, renderer, cams, obs, panda)
+    batch = [objects] * BATCH
+    paths = {
+        "reference": (lambda: ref.evaluate(objects), 1),
+        "fast": (lambda: fast.evaluate(objects), 1),
+        f"batch {BATCH}": (lambda: fast.evaluate_many(batch), BATCH),
+    }
+    if panda is not None:
+        parts = fast.parts(objects)
+        paths["panda3d"] = (None, lambda seconds: panda.rate([parts], seconds))
+    return paths
+
+
+def move_sequence(model, objects, rng):
+    """MOVES single-object parameter moves of object 0, as a chain's drift would make them."""
+    obj = objects[0]
+    out = []
+    for _ in range(MOVES):
+        values = dict(obj.values)
+        values["x"] += rng.normal(0, 0.05)
+        values["y"] += rng.normal(0, 0.05)
+        out.append((make_object(model, obj.cls, values),) + objects[1:])
+    return out
+
+
+def memory_floor(obs) -> float:
+    arrays = [a for f in obs.frames for a in (f.rgb, f.depth) if a is not None]
+    return lambda: [a.sum() for a in arrays]
+
+
+def table(title, header, rows):
+    print(f"\n### {title}\n")
+    print("| " + " | ".join(header) + " |")
+    print("|" + "|".join("---:" if i else "---" for i in range(len(header))) + "|")
+    for row in rows:
+        print("| " + " | ".join(row) + " |")
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="only 128x128, 2 cameras, K=3")
+    ap.add_argument("--objects", type=int, nargs="+", default=[1, 3, 10, 30])
+    ap.add_argument("--cameras", type=int, nargs="+", default=[1, 2, 4])
+    ap.add_argument("--pixels", type=int, nargs="+", default=[64, 128, 256])
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--seconds", type=float, default=0.3, help="length of one run")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.objects, args.cameras, args.pixels = [3], [2], [128]
+
+    model = load_model(ROOT / "models" / "shapes.scn")
+    renderer = Renderer(model.render)
+    print(f"GL renderer: {renderer_string()}")
+    why_not = panda3d_path.available()
+    panda_ok = why_not is None
+    panda = panda3d_path.Worker() if panda_ok else None
+    if not panda_ok:
+        print(f"panda3d path skipped: {why_not}")
+    rng = np.random.default_rng(0)
+
+    # -- full-scene scoring over the grid -----------------------------------------------------
+    names = ["reference", "fast", f"batch {BATCH}"] + (["panda3d"] if panda_ok else [])
+    rows, focus = [], None
+    for k, n_cam, size in itertools.product(args.objects, args.cameras, args.pixels):
+        objects, cams, obs = setting(model, renderer, k, n_cam, size, rng)
+        paths = full_paths(model, renderer, objects, cams, obs, panda)
+        r = measure(paths, args.repeats, args.seconds)
+        row = [str(k), str(n_cam), f"{size}"]
+        for name in names:
+            ratio = "" if name == "fast" else f" ({r['fast'] / r[name]:.2f}x)"
+            row.append(f"{r[name]:,.0f}{ratio}")
+        rows.append(row)
+        if (k, n_cam, size) == (3, 2, 128) or focus is None:
+            focus = (k, n_cam, size, objects, cams, obs, r)
+    table("Full-scene scoring: evaluations per second (fast path's speed-up over each path)",
+          ["K", "cameras", "pixels", *names], rows)
+
+    # -- incremental single-object moves and the memory floor, at the focus setting -----------
+    k, n_cam, size, objects, cams, obs, full = focus
+    fast, ref = scorers(model, renderer, cams, obs, panda)
+    sampler = Sampler(model, fast, np.random.default_rng(1))
+    state = sampler.make_trace(objects, NOISE)
+    moves = move_sequence(model, objects, rng)
+    move_parts = [fast.parts(m) for m in moves]
+    paths = {
+        "incremental (fast)": (lambda: [fast.evaluate(m, parent=state) for m in moves], MOVES),
+        "full (fast)": (lambda: [fast.evaluate(m) for m in moves], MOVES),
+        "reference": (lambda: [ref.evaluate(m) for m in moves], MOVES),
+        **({"panda3d": (None, lambda seconds: panda.rate(move_parts, seconds))}
+           if panda is not None else {}),
+        "memory floor": (memory_floor(obs), 1),
+    }
+    r = measure(paths, args.repeats, args.seconds)
+    inc = r["incremental (fast)"]
+    table(f"Single-object parameter moves, K={k}, {n_cam} cameras, {size}x{size}: "
+          "evaluations per second (incremental path's speed-up over each)",
+          ["path", "evals/s", "incremental is"],
+          [[name, f"{v:,.0f}", "" if name.startswith("incremental") else f"{inc / v:.2f}x"]
+           for name, v in r.items()])
+    floor = r["memory floor"]
+    print(f"\nMemory floor (reading the observations once): {floor:,.0f} per second; "
+          f"the fast path is {floor / full['fast']:.1f}x from it on full scenes, "
+          f"{floor / full[f'batch {BATCH}']:.1f}x batched and {floor / inc:.1f}x incrementally.")
+    if panda is not None:
+        panda.close()
+
+
+if __name__ == "__main__":
+    main()
