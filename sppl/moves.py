@@ -30,7 +30,7 @@ JUMPS = ("birth", "death", "change", "replace")
 
 @dataclass(frozen=True, eq=False)
 class Proposal:
-    move: str  # "parameters", "birth", "death", "change" or "noise"
+    move: str  # "parameters", "birth", "death", "change", "replace" or "noise"
     label: str  # class name, or sensor kind for noise moves: acceptance is counted per label
     objects: tuple[SceneObject, ...]
     noise: Mapping[str, Mapping[str, float]]
@@ -197,17 +197,38 @@ def propose_noise(
 
 
 def reverse(
-    model: Model, before: Trace, proposal: Proposal, after: Trace, birth: BirthProposal
+    model: Model,
+    before: Trace,
+    proposal: Proposal,
+    after: Trace,
+    birth: BirthProposal,
+    without: Callable[[tuple[SceneObject, ...]], Trace] | None = None,
 ) -> Proposal:
     """The proposal that undoes ``proposal``, made from ``after``, the state it led to.
 
     Built independently of the forward move from the same proposal densities: a birth's
     reverse is the death of the born object, a death's the birth of the same object at its
     old place, a change's the change back (carrying the same parameters and proposing exactly
-    the dropped ones), a parameter or noise move's the step back. The log acceptance ratio of
-    the reverse is minus that of the move, and applying both gives back ``before``: the debug
-    check ``sppl.verify.check_reverse`` does exactly that.
+    the dropped ones), a replace's the replacement of the new object by the old one through
+    the same scene without either (which ``without`` renders, as in ``propose_replace``), a
+    parameter or noise move's the step back. The log acceptance ratio of the reverse is minus
+    that of the move, and applying both gives back ``before``: the debug check
+    ``sppl.verify.check_reverse`` does exactly that. A move type this does not know raises
+    ``ValueError``, which the check reports as a failure.
     """
+    if proposal.move == "replace":
+        if without is None:
+            raise ValueError("the reverse of a replace needs `without` to render the scene x-")
+        k = _place(after.objects, proposal.changed[0])
+        new, old = after.objects[k], before.objects[k]
+        rest = after.objects[:k] + after.objects[k + 1 :]
+        state = without(rest)
+        objects = rest[:k] + (old,) + rest[k:]
+        # The object (1/K) and the class (1/|C|) are chosen alike both ways and cancel.
+        ratio = birth.log_density(new.cls, new.values, state) - birth.log_density(
+            old.cls, old.values, state
+        )
+        return Proposal("replace", new.cls.name, objects, after.noise, (old,), ratio)
     if proposal.move == "birth":
         return death_of(model, after, _place(after.objects, proposal.changed[0]), birth)
     if proposal.move == "death":

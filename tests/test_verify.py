@@ -173,7 +173,9 @@ def test_every_move_and_its_reverse(no_overlap):
     model = toy_model([ball_class(rate=2.0), block_class(rate=0.5), tile_class()], no_overlap=no_overlap)
     report = verify.move_checks(model, states=40, seed=4)
     assert report.passed, report.table()
-    assert {r.quantity.split(":")[0] for r in report.rows} >= {"birth", "death", "change", "parameters"}
+    assert {r.quantity.split(":")[0] for r in report.rows} >= {
+        "birth", "death", "change", "replace", "parameters", "change ball <-> block",
+        "change ball <-> tile", "change block <-> tile"}
 
 
 def test_moves_and_reverses_with_data_driven_births(require_gl):
@@ -181,7 +183,7 @@ def test_moves_and_reverses_with_data_driven_births(require_gl):
     report = verify.move_checks(model, states=40, seed=5, size=16)
     assert report.passed, report.table()
     assert {r.quantity.split(":")[0] for r in report.rows} == {
-        "birth", "death", "change", "parameters", "noise"}
+        "birth", "death", "change", "replace", "parameters", "noise", "change ball <-> block"}
 
 
 def test_birth_then_death_from_a_known_state_by_hand():
@@ -218,6 +220,51 @@ def test_a_broken_reverse_is_caught():
     model = toy_model([ball_class(rate=2.0), block_class(rate=0.5)])
     report = verify.move_checks(model, states=20, seed=0, sampler_factory=Forgetful)
     assert [r.quantity for r in report.failures] == ["change: reverse undoes it"]
+
+
+def test_a_replace_without_its_proposal_ratio_is_caught():
+    """A replace that forgets log q_birth(old | x-) - log q_birth(new | x-): the ratio of
+    its reverse, built separately by ``moves.reverse``, no longer cancels it."""
+
+    class NoRatio(Sampler):
+        def propose_jump(self, trace):
+            p = super().propose_jump(trace)
+            return replace(p, log_q_ratio=0.0) if p is not None and p.move == "replace" else p
+
+    model = toy_model([ball_class(rate=2.0), block_class(rate=0.5)])
+    report = verify.move_checks(model, states=20, seed=0, sampler_factory=NoRatio)
+    assert [r.quantity for r in report.failures] == ["replace: reverse undoes it"]
+
+
+def test_a_jump_without_a_known_reverse_fails_the_move_checks():
+    """The move checks take the jumps from the sampler itself, so a new kind of jump is
+    checked without being named, and fails until ``moves.reverse`` knows how to undo it."""
+
+    class Swapping(Sampler):
+        def propose_jump(self, trace):
+            if len(trace.objects) > 1 and self.rng.random() < 0.3:
+                objects = trace.objects[1:] + trace.objects[:1]
+                return moves.Proposal("swap", "", objects, trace.noise, ())
+            return super().propose_jump(trace)
+
+    model = toy_model([ball_class(rate=2.0)])
+    report = verify.move_checks(model, states=20, seed=0, sampler_factory=Swapping)
+    failed = report.failures
+    assert [r.quantity for r in failed] == ["swap: reverse undoes it"], report.table()
+    assert "no reverse" in failed[0].observed
+
+
+def test_a_change_that_cannot_carry_a_parameter_back_is_named():
+    """A class built in Python that pairs a ball's positive radius with a block's periodic
+    angle (the language refuses this when it compiles a model file): values of one domain do
+    not fit the other, so the change cannot carry them back."""
+    ball, block = ball_class(rate=2.0), block_class(rate=0.5)
+    ball = replace(ball, correspondences={"block": {"r": "a"}})
+    block = replace(block, correspondences={"ball": {"a": "r"}})
+    report = verify.move_checks(toy_model([ball, block]), states=10, seed=0)
+    failed = [r for r in report.failures if r.check == "moves"]
+    assert [r.quantity for r in failed] == ["change ball <-> block: carries back"], report.table()
+    assert "ball.r (positive) -> block.a (periodic" in failed[0].observed
 
 
 def test_birth_inserts_at_a_uniform_place():
