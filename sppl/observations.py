@@ -152,6 +152,12 @@ def _transforms_path(folder: str | Path) -> Path:
             "observation folder not found", path=folder, hint="check the path given to --obs"
         )
     path = folder / "transforms.json"
+    if folder.is_dir() and not any(folder.iterdir()):
+        raise ObservationError(
+            "observation folder is empty", path=folder,
+            hint="it should hold transforms.json (nerfstudio layout) and the images and depth "
+            "maps it names; `sppl simulate` writes one",
+        )
     if not path.is_file():
         raise ObservationError(
             "no transforms.json in this folder",
@@ -587,9 +593,13 @@ def _read_depth(r: _FrameReader, path: Path, scale: float) -> np.ndarray:
         try:
             with Image.open(path) as im:
                 if im.mode not in _INTEGER_DEPTH_MODES:
+                    kind = {"L": "8-bit greyscale", "1": "1-bit", "P": "8-bit palette",
+                            "RGB": "8-bit colour", "RGBA": "8-bit colour"}.get(im.mode, "")
                     raise r.error(
-                        f"depth PNG is mode {im.mode}, not 16-bit greyscale",
-                        hint="store integer units of integer_depth_scale metres (default mm)",
+                        f"depth PNG is {kind + ' ' if kind else ''}(mode {im.mode}), not 16-bit "
+                        "greyscale",
+                        hint="store integer units of integer_depth_scale metres (default 0.001, "
+                        "millimetres) in one 16-bit channel, or float metres in .npy",
                         path=path,
                     )
                 depth = np.asarray(im, dtype=np.float64) * scale

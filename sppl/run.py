@@ -101,6 +101,10 @@ def run_chain(
     from .render import Renderer, renderer_string
 
     out.mkdir(parents=True, exist_ok=True)
+    fingerprints = {"model_sha256": model_fingerprint(model),
+                    "observations_sha256": observations_fingerprint(observations)}
+    if resume and (out / "run.json").exists():
+        _check_same_inputs(out, fingerprints)  # before anything is rendered
     renderer = renderer or Renderer(model.render)
     scorer = Scorer(model, observations, renderer)
     if not isinstance(seed, np.random.SeedSequence):
@@ -111,12 +115,7 @@ def run_chain(
     seed = _seed_record(seed)
     sampler = Sampler(model, scorer, rng)
     burn_option, burn = burn, steps // 2 if burn is None else burn
-    fingerprints = {"model_sha256": model_fingerprint(model),
-                    "observations_sha256": observations_fingerprint(observations)}
-    state = None
-    if resume and (out / "run.json").exists():
-        _check_same_inputs(out, fingerprints)
-        state = read_checkpoint(out)
+    state = read_checkpoint(out) if resume else None
     meta = {
         "sppl_version": __version__,
         "seed": seed,
@@ -230,12 +229,12 @@ def _check_same_inputs(out: Path, fingerprints: dict[str, str]) -> None:
         meta = json.loads((out / "run.json").read_text())
     except (OSError, json.JSONDecodeError) as e:
         raise RunError(f"cannot read the run's record ({e})", path=out / "run.json") from None
-    for key, what in (("model_sha256", "model"), ("observations_sha256", "observations")):
+    for key, what in (("model_sha256", "model has"), ("observations_sha256", "observations have")):
         if meta.get(key) not in (None, fingerprints[key]):
             raise RunError(
-                f"the {what} differ from those this run started with, so resuming would "
-                "mix two posteriors", path=out,
-                hint=f"resume with the run's original {what}, or start a new run",
+                f"the {what} changed since this run started, so resuming would mix two "
+                "posteriors", path=out,
+                hint=f"resume with the run's original {what.split()[0]}, or start a new run",
             )
 
 

@@ -262,7 +262,7 @@ def test_resume_errors(setup, tmp_path, capsys):
     changed = tmp_path / "changed.scn"
     changed.write_text(model.source.replace("poisson(1)", "poisson(2)", 1))
     assert main(["sample", str(changed), "--resume", str(out), "--steps", "8", "-q"]) == 1
-    assert "model differ from those this run started with" in capsys.readouterr().err
+    assert "model has changed since this run started" in capsys.readouterr().err
 
 
 def test_a_damaged_checkpoint_is_a_clear_error(setup, tmp_path, capsys):
