@@ -52,7 +52,8 @@ from scipy import stats
 from . import moves
 from .camera import Camera, focal_from_fov, look_at
 from .chain import Sampler
-from .domains import Finite
+from .domains import Finite, Integer
+from .errors import SpplError
 from .model import Model
 from .observations import CameraSpec, Frame, Observations
 from .scoring import PriorScorer, Scorer
@@ -469,6 +470,14 @@ def prior_declarations(model: Model, *, draws: int = 4000, seed=0, alpha: float 
         samples = [draw() for _ in range(draws)]
         for par in parameters:
             name = f"{owner}.{par.name}: draws match density"
+            # Where the density is zero at a draw, the prior the sampler targets (truncated
+            # to the domain, renormalised per object) is not the one that births draw from.
+            outside = sum(not math.isfinite(par.log_prob(v[par.name], v)) for v in samples)
+            if outside:
+                rows.append(Row("prior", name, f"every draw inside {par.domain.describe()}",
+                                f"{outside}/{len(samples)} draws where the density is 0",
+                                None, False))
+                continue
             if isinstance(par.domain, Finite):
                 if par.prior_fn is not None or not hasattr(par.prior, "probs"):
                     continue
@@ -513,6 +522,15 @@ def _exact_test(draws, par, rng) -> tuple[str, float] | None:
     if par.continuous and hasattr(prior, "cdf"):
         p = float(stats.kstest(np.asarray(draws, dtype=float), prior.cdf).pvalue)
         return f"{prior}: {_mean_sd([prior.sample(rng) for _ in range(4000)])}", p
+    if isinstance(par.domain, Integer) and hasattr(prior, "cdf") and len(draws):
+        # Bins lo, ..., hi of the values seen, the outer two taking the tails.
+        d = np.asarray(draws, dtype=int)
+        lo, hi = int(d.min()), int(d.max())
+        cdf = np.array([float(prior.cdf(v)) for v in range(lo - 1, hi + 1)])
+        probs = np.diff(cdf)
+        probs[0] += cdf[0]
+        probs[-1] += 1.0 - cdf[-1]
+        return str(prior), chisquare_gof(np.bincount(d - lo, minlength=hi - lo + 1), probs)[1]
     if isinstance(par.domain, Finite) and hasattr(prior, "probs"):
         labels = par.domain.values
         observed = [sum(1 for x in draws if x == v) for v in labels]
@@ -982,24 +1000,44 @@ def verify_model(
     sampler_factory: Callable[..., Sampler] = Sampler,
     progress: Callable[[str], None] | None = None,
 ) -> Report:
-    """Prior recovery, the move checks and (when the model has sensors) a short Geweke test
-    on one model, in one report whose verdict is corrected for multiple comparisons."""
+    """The check of the declarations, prior recovery, the move checks and (when the model has
+    sensors) a short Geweke test on one model, in one report whose verdict is corrected for
+    multiple comparisons. A check stopped by an error of the model (a dependent prior whose
+    arguments break it for some values, say) gives a failing row with the error in the notes,
+    and the others still run."""
     say = progress or (lambda message: None)
     prior_seq, moves_seq, geweke_seq = _seq(seed).spawn(3)
-    say(f"prior recovery: {steps} sweeps with no observations ...")
-    reports = [
-        prior_declarations(model, seed=prior_seq.spawn(1)[0]),
-        prior_recovery(model, sweeps=steps, seed=prior_seq, sampler_factory=sampler_factory),
-    ]
     if model.sensors and renderer is None and run_geweke:
         from .render import Renderer
 
         renderer = Renderer(model.render)
-    say("moves and their reverses ...")
-    reports.append(move_checks(model, seed=moves_seq, size=size, renderer=renderer,
-                               sampler_factory=sampler_factory, observe=run_geweke))
+    checks = [
+        ("prior", "the priors' draws against their densities", None,
+         lambda: prior_declarations(model, seed=prior_seq.spawn(1)[0])),
+        ("prior", "prior recovery", f"prior recovery: {steps} sweeps with no observations ...",
+         lambda: prior_recovery(model, sweeps=steps, seed=prior_seq,
+                                sampler_factory=sampler_factory)),
+        ("moves", "moves and their reverses", "moves and their reverses ...",
+         lambda: move_checks(model, seed=moves_seq, size=size, renderer=renderer,
+                             sampler_factory=sampler_factory, observe=run_geweke)),
+    ]
     if run_geweke and model.sensors:
-        say(f"geweke: {geweke_chains} chains of {geweke_length} sweeps on {size}x{size} images ...")
-        reports.append(geweke(model, chains=geweke_chains, length=geweke_length, seed=geweke_seq,
-                              size=size, renderer=renderer, sampler_factory=sampler_factory))
+        checks.append((
+            "geweke", "Geweke test",
+            f"geweke: {geweke_chains} chains of {geweke_length} sweeps on {size}x{size} images ...",
+            lambda: geweke(model, chains=geweke_chains, length=geweke_length, seed=geweke_seq,
+                           size=size, renderer=renderer, sampler_factory=sampler_factory),
+        ))
+    reports = []
+    for check, what, message, run in checks:
+        if message:
+            say(message)
+        try:
+            reports.append(run())
+        except SpplError as error:
+            reports.append(Report(
+                [Row(check, f"{what}: runs", "no error", "stopped by an error (below)", None,
+                     False)],
+                alpha, [f"{check}: {what} stopped: {error}"],
+            ))
     return combine(reports, alpha)
