@@ -581,7 +581,7 @@ def _read_depth(r: _FrameReader, path: Path, scale: float) -> np.ndarray:
     if suffix == ".npy":
         try:
             depth = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as e:
+        except (OSError, ValueError, EOFError) as e:  # EOFError: an empty or truncated file
             raise r.error(f"cannot read depth map: {e}", path=path) from None
         if not np.issubdtype(depth.dtype, np.floating):
             raise r.error(
