@@ -19,7 +19,7 @@ try:
     from panda3d.core import loadPrcFileData
 
     loadPrcFileData("", "load-display p3headlessgl\nwindow-type offscreen\n"
-                        "audio-library-name null\nsync-video false\nnotify-level error")
+                        "audio-library-name null\nsync-video false\nnotify-level fatal")
     from panda3d.core import (
         AmbientLight, DirectionalLight, FrameBufferProperties, Geom, GeomNode, GeomTriangles,
         GeomVertexData, GeomVertexFormat, GraphicsEngine, GraphicsOutput, GraphicsPipe,
@@ -103,6 +103,13 @@ class PandaScorer:
         self.geoms = {}
         self.nodes: list[NodePath] = []
 
+    def close(self) -> None:
+        """Remove this scorer's buffers: the engine renders every open output each frame."""
+        for buffer, _, _ in self.outputs:
+            self.engine.remove_window(buffer)
+        self.outputs = []
+        self.root.remove_node()
+
     def statistics(self, parts) -> list[tuple[float, float]]:
         """Per camera, the Gaussian statistics (sum of squared residuals) of RGB and depth."""
         while len(self.nodes) < len(parts):
@@ -147,6 +154,8 @@ def _serve(conn) -> None:
     while True:
         message = conn.recv()
         if message[0] == "setup":
+            if scorer is not None:
+                scorer.close()
             scorer = PandaScorer(*message[1:])
             conn.send(None)
         elif message[0] == "rate":
