@@ -84,7 +84,10 @@ def sample(model_path: str | Path, obs: str | Path, out: str | Path, *, steps: i
 @dataclass(frozen=True)
 class Recovery:
     """How many true objects a scene estimate recovered: matched (optimal assignment by ground
-    position) within ``tolerance`` metres, with the right class and categories (colours)."""
+    position) within ``tolerance`` metres, with the right class and categories (colours).
+    ``extra_in_view``: estimated objects matched to no true one that some camera sees, in
+    at least ``MIN_PIXELS`` pixels (all of them when the estimate was not checked against
+    cameras); ``extra_pixels``: how many pixels each extra object shows in."""
 
     found: int
     n_true: int
@@ -92,23 +95,72 @@ class Recovery:
     wrong_class: int
     wrong_category: int
     max_position_error: float
+    extra_in_view: int
+    extra_pixels: tuple[int, ...] = ()
 
     @property
     def all_found(self) -> bool:
-        return self.found == self.n_true == self.n_estimated
+        """Every true object recovered, and nothing more that a camera could see. Objects
+        no camera sees (out of every view, or hidden behind others but for a sliver of a few
+        pixels) are left out: the observations say next to nothing about them, so the
+        posterior keeps the prior's belief there."""
+        return self.found == self.n_true and self.extra_in_view == 0
 
 
-def recovery(estimate: Sequence[dict], truth: Sequence[dict], tolerance: float = 0.15) -> Recovery:
+MIN_PIXELS = 10  # an object showing in fewer pixels than this counts as unseen
+
+
+def recovery(estimate: Sequence[dict], truth: Sequence[dict], tolerance: float = 0.15,
+             *, pixels: Sequence[int] | None = None) -> Recovery:
+    """``pixels``: for each estimated object, how many pixels it shows in (``pixels_seen``);
+    without it every extra object counts as seen."""
     errors = compare_scenes(estimate, truth)
     found = 0
-    for e, t, d in match_objects(estimate, truth, max_distance=tolerance):
+    matched = set()
+    for e, t, _ in match_objects(estimate, truth, max_distance=tolerance):
+        matched.add(e)
         est, true = estimate[e], truth[t]
         cats = {k: v for k, v in true["params"].items() if isinstance(v, str)}
         same_categories = all(est["params"].get(k) == v for k, v in cats.items())
         if est["class"] == true["class"] and same_categories:
             found += 1
+    extra = [e for e in range(len(estimate)) if e not in matched]
+    in_view = sum(1 for e in extra if pixels is None or pixels[e] >= MIN_PIXELS)
     return Recovery(found, errors.n_true, errors.n_estimated, errors.wrong_class,
-                    errors.wrong_category, errors.max_position_error)
+                    errors.wrong_category, errors.max_position_error, in_view,
+                    tuple(pixels[e] for e in extra) if pixels is not None else ())
+
+
+def pixels_seen(model_path: str | Path, obs: str | Path, objects: Sequence[dict]) -> list[int]:
+    """For each object of a scene, the number of pixels of the observation folder's cameras
+    (RGB and depth alike) whose rendering changes when that object is taken out of the scene:
+    0 for an object out of every view or hidden behind the others."""
+    from .lang import load_model
+    from .observations import load_observations
+    from .render import Renderer
+    from .simulate import objects_from_dict
+
+    model = load_model(model_path)
+    cameras = load_observations(obs).cameras
+    scene = objects_from_dict(model, {"objects": list(objects)})
+    renderer = Renderer(model.render)
+    try:
+        def draw(kept):
+            parts = [*model.static_parts, *(p for o in kept for p in o.parts)]
+            return [renderer.render(parts, camera) for camera in cameras]
+
+        full = draw(scene)
+        counts = []
+        for i in range(len(scene)):
+            without = draw(scene[:i] + scene[i + 1:])
+            changed = 0
+            for (rgb, depth), (rgb2, depth2) in zip(full, without):
+                diff = np.any(np.abs(rgb - rgb2) > 1e-6, axis=-1) | (np.abs(depth - depth2) > 1e-6)
+                changed += int(diff.sum())
+            counts.append(changed)
+        return counts
+    finally:
+        renderer.release()
 
 
 def load_objects(path: str | Path) -> list[dict[str, Any]]:

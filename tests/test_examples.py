@@ -91,3 +91,31 @@ def test_four_chains_on_three_shapes_agree_and_report_opens(tmp_path, require_gl
             failures.append(f"the report page: {page.images} images, {page.problems}")
     assert not failures, "\n".join(failures)
     require_chromium()  # without Chromium the page is unchecked: skip (on CI, fail)
+
+
+# -- what the fusion table counts ---------------------------------------------------------------
+
+
+def test_recovery_leaves_out_extra_objects_no_camera_sees():
+    from sppl.experiment import MIN_PIXELS, recovery
+
+    truth = [{"class": "cube", "params": {"x": 0.0, "y": 0.0, "s": 0.5, "c": "red"}}]
+    right = {"class": "cube", "params": {"x": 0.05, "y": 0.0, "s": 0.5, "c": "red"}}
+    extra = {"class": "cone", "params": {"x": 3.0, "y": 3.0, "r": 0.2, "h": 0.5, "c": "blue"}}
+    assert not recovery([right, extra], truth).all_found  # unchecked: every extra counts
+    hidden = recovery([right, extra], truth, pixels=[200, MIN_PIXELS - 1])
+    assert hidden.all_found and hidden.extra_in_view == 0 and hidden.extra_pixels == (9,)
+    assert not recovery([right, extra], truth, pixels=[200, MIN_PIXELS]).all_found
+    wrong_colour = {**right, "params": {**right["params"], "c": "green"}}
+    assert recovery([wrong_colour], truth, pixels=[200]).found == 0
+
+
+def test_pixels_seen_is_zero_out_of_view_and_behind_another(root, require_gl):
+    from sppl.experiment import load_objects, pixels_seen
+
+    obs = root / "examples" / "three_shapes" / "obs"
+    scene = load_objects(obs / "scene.json")
+    far = {"class": "sphere", "params": {"x": 0.0, "y": 40.0, "r": 0.3, "c": "red"}}
+    inside = {"class": "cube", "params": {**scene[0]["params"], "s": 0.2}}  # within the cube
+    counts = pixels_seen(root / "models" / "shapes.scn", obs, [*scene, far, inside])
+    assert all(c > 50 for c in counts[:3]) and counts[3:] == [0, 0], counts

@@ -94,36 +94,40 @@ def main(argv=None) -> int:
 
     runfiles = load_run(run)
     burn = runfiles.burn
+    best = max(chain.summary["map"]["score"] for chain in runfiles.chains)
     chains = []
     for i, chain in enumerate(runfiles.chains):
         kept = [x for x in chain.samples if x["step"] >= burn]
         matched = on_the_ray(kept, true_obj, centre)
         chains.append({
             "index": i, "score": chain.summary["map"]["score"], "samples": len(kept),
-            "d": np.array([along_across(o)[0] for o in matched]),
-            "lateral": np.array([along_across(o)[1] for o in matched]),
-            "size": np.array([o["params"]["s"] for o in matched]),
+            "d": np.array([along_across(o)[0] for _, o in matched]),
+            "lateral": np.array([along_across(o)[1] for _, o in matched]),
+            "size": np.array([o["params"]["s"] for _, o in matched]),
+            # A sample is in the main mode when its log joint is near the best any chain found.
+            "main": np.array([score > best - MODE_NATS for score, _ in matched], dtype=bool),
         })
-    best = max(c["score"] for c in chains)
-    for c in chains:
-        c["main"] = c["score"] > best - MODE_NATS
     d_true = along_across(true_obj)[0]
     print(f"per chain, after burn-in: the cube on the camera's ray through the true one (within "
           f"{RAY_DEGREES:g} degrees); true distance {d_true:.3f} m, side {true_obj['params']['s']}")
-    print(f"{'chain':>5} {'MAP log joint':>13} {'mode':>6} {'distance (m)':>15} "
+    print(f"{'chain':>5} {'MAP log joint':>13} {'in main mode':>12} {'distance (m)':>15} "
           f"{'across sd':>9} {'side s (m)':>15} {'corr(s, dist)':>13}")
     for c in chains:
-        if len(c["d"]) > 2:
-            print(f"{c['index']:>5} {c['score']:>13.1f} {('main' if c['main'] else 'other'):>6} "
-                  f"{c['d'].mean():>7.3f} ± {c['d'].std():.3f} {c['lateral'].std():>9.3f} "
-                  f"{c['size'].mean():>7.3f} ± {c['size'].std():.3f} "
-                  f"{np.corrcoef(c['size'], c['d'])[0, 1]:>+13.2f}")
+        share = f"{c['main'].mean():.0%}" if len(c["main"]) else "-"
+        head = f"{c['index']:>5} {c['score']:>13.1f} {share:>12}"
+        m = c["main"]
+        if m.sum() > 2:
+            print(f"{head} {c['d'][m].mean():>7.3f} ± {c['d'][m].std():.3f} "
+                  f"{c['lateral'][m].std():>9.3f} {c['size'][m].mean():>7.3f} ± "
+                  f"{c['size'][m].std():.3f} {np.corrcoef(c['size'][m], c['d'][m])[0, 1]:>+13.2f}")
+        elif len(c["d"]):
+            print(f"{head}   elsewhere: {c['d'].mean():.3f} m away, side {c['size'].mean():.3f} m")
         else:
-            print(f"{c['index']:>5} {c['score']:>13.1f} {('main' if c['main'] else 'other'):>6} "
-                  "  no cube on that ray")
+            print(f"{head}   no cube on that ray")
     true_lj = experiment.log_joint(model_path, obs, json.loads((obs / "scene.json").read_text()))
-    print(f"'main': MAP log joint within {MODE_NATS:g} nats of the best chain's; the true scene's "
-          f"log joint is {true_lj:.1f}")
+    print(f"main mode: samples whose log joint is within {MODE_NATS:g} nats of the best MAP "
+          f"({best:.1f}); the columns after it are over those samples; the true scene's log "
+          f"joint is {true_lj:.1f}")
 
     print("acceptance rate per move (all chains): "
           + ", ".join(f"{m}: {a['rate']:.3f}" for m, a in summary["acceptance"].items()))
@@ -153,7 +157,7 @@ def on_the_ray(samples, true_obj, centre):
     nearest to the camera of its cubes within RAY_DEGREES of that direction (one farther
     along the ray would be hidden behind it)."""
     ray = _direction(true_obj, centre)
-    out = []
+    out = []  # (the sample's log joint, the cube)
     for s in samples:
         best, best_distance = None, np.inf
         for o in s["objects"]:
@@ -165,7 +169,7 @@ def on_the_ray(samples, true_obj, centre):
             if angle <= RAY_DEGREES and distance < best_distance:
                 best, best_distance = o, distance
         if best is not None:
-            out.append(best)
+            out.append((s["score"], best))
     return out
 
 
@@ -182,28 +186,29 @@ def ambiguity_figure(path, chains, d_true, true_obj) -> None:
     fig = Figure(figsize=(9.5, 3.8), layout="constrained")
     ax0, ax1 = fig.subplots(1, 2)
     s_true = true_obj["params"]["s"]
-    main = [c for c in chains if c["main"] and len(c["d"])]
+    main = [c for c in chains if c["main"].any()]
     for c in main:
-        ax0.scatter(c["d"], c["size"], s=3, alpha=0.3, color=CHAIN_COLOURS[c["index"]],
+        m = c["main"]
+        ax0.scatter(c["d"][m], c["size"][m], s=3, alpha=0.3, color=CHAIN_COLOURS[c["index"]],
                     label=f"chain {c['index']}")
     if main:
-        d_all = np.concatenate([c["d"] for c in main])
+        d_all = np.concatenate([c["d"][c["main"]] for c in main])
         ds = np.linspace(min(d_all.min(), d_true) - 0.02, max(d_all.max(), d_true) + 0.02, 20)
         ax0.plot(ds, s_true * ds / d_true, color="grey", ls=":", label="same size in the image")
     ax0.plot(d_true, s_true, "*", color="#d62728", ms=12, label="truth")
     ax0.set_xlabel("distance from the camera along its ray (m)")
     ax0.set_ylabel("cube side s (m)")
-    ax0.set_title("chains in the main mode", fontsize=10)
+    ax0.set_title("samples in the main mode, every chain", fontsize=10)
     _legend(ax0)
     for c in chains:
         if len(c["d"]):
             ax1.scatter(c["lateral"], c["d"], s=3, alpha=0.3, color=CHAIN_COLOURS[c["index"]],
-                        label=f"chain {c['index']} ({'main' if c['main'] else 'other'}: "
-                        f"{c['score']:.0f})")
+                        label=f"chain {c['index']} (MAP {c['score']:.0f}; "
+                        f"{c['main'].mean():.0%} in the main mode)")
     ax1.plot(0.0, d_true, "*", color="#d62728", ms=12)
     ax1.set_xlabel("across the ray (m)")
     ax1.set_ylabel("along the ray (m)")
-    ax1.set_title("every chain: the cube's centre from above (MAP log joint)", fontsize=10)
+    ax1.set_title("every chain: the cube's centre from above, after burn-in", fontsize=10)
     _legend(ax1)
     fig.savefig(path, dpi=80)
 
