@@ -177,6 +177,28 @@ def test_sigkill_at_a_random_moment_loses_only_the_sweep_being_drawn(setup, tmp_
     assert read_samples(samples) == expected
 
 
+def test_sigterm_stops_cleanly_with_samples_summary_and_checkpoint_agreeing(setup, tmp_path,
+                                                                           root):
+    _, _, d, _ = setup
+    out = tmp_path / "run"
+    p = subprocess.Popen(sample_command(root / "models" / "shapes.scn", d / "obs", out,
+                                        "--steps", 10**6),
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    samples = out / "samples.jsonl"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not (samples.exists() and samples.stat().st_size):
+        time.sleep(0.05)
+    p.terminate()
+    stdout, stderr = p.communicate(timeout=120)
+    assert p.returncode == 130, stderr
+    assert "interrupted after" in stdout and f"sppl sample --resume {out}" in stderr
+    summary = json.loads((out / "summary.json").read_text())
+    done = summary["steps_done"]
+    assert summary["interrupted"] and done > 0
+    assert [s["step"] for s in read_samples(samples)] == list(range(1, done + 1))
+    assert json.loads((out / CHECKPOINT).read_text())["step"] == done
+
+
 KILL_SCRIPT = """
 import os, signal, sys
 from pathlib import Path
