@@ -227,6 +227,25 @@ def test_birth_then_death_from_a_known_state_by_hand():
     assert same
 
 
+def test_replace_from_a_known_state_by_hand():
+    """From a ball and a block, the ball replaced by a fresh block. With no observations the
+    birth proposal is the prior, so alpha_replace = lambda_block p(new) p(old) /
+    (lambda_ball p(old) p(new)) = 0.5 / 2, and the replace back is its exact inverse."""
+    model = toy_model([ball_class(rate=2.0), block_class(rate=0.5)])
+    sampler = Sampler(model, PriorScorer(), np.random.default_rng(0))
+    ball, block = model.classes
+    trace = sampler.initial_trace([sampler_object(model, ball, 1), sampler_object(model, block, 2)])
+    without = lambda objs: sampler.make_trace(objs, trace.noise)  # noqa: E731
+    rng = np.random.default_rng(3)
+    p = next(p for p in iter(lambda: moves.propose_replace(model, trace, rng, sampler.birth,
+                                                             without), None)
+             if p.label == "ball" and p.changed[0].cls is block)
+    forward, backward, same = verify.check_reverse(sampler, trace, p)
+    assert forward == pytest.approx(math.log(0.5 / 2))
+    assert backward == pytest.approx(-forward)
+    assert same
+
+
 def sampler_object(model, cls, seed):
     from sppl.trace import make_object
 
@@ -574,6 +593,20 @@ def test_prior_recovery_long():
     model = toy_model([ball_class(rate=2.0), block_class(rate=0.5), tile_class(rate=1.2)],
                       noise=True)
     report = verify.prior_recovery(model, sweeps=200_000, seed=21)
+    assert report.passed, report.table()
+
+
+@pytest.mark.slow
+def test_prior_recovery_of_every_kind_of_declaration_long():
+    model = load_model(FIXTURES / "features.scn")
+    report = verify.prior_recovery(model, sweeps=60_000, seed=25, reference_draws=20_000)
+    assert report.passed, report.table()
+
+
+@pytest.mark.slow
+def test_geweke_with_static_scenery_long(require_gl, root):
+    model = load_model(root / "models" / "tabletop.scn")
+    report = verify.geweke(model, chains=300, length=20, seed=26)
     assert report.passed, report.table()
 
 
