@@ -113,7 +113,7 @@ def main(argv=None) -> int:
     print(f"{'chain':>5} {'MAP log joint':>13} {'in main mode':>12} {'distance (m)':>15} "
           f"{'across sd':>9} {'side s (m)':>15} {'corr(s, dist)':>13}")
     for c in chains:
-        share = f"{c['main'].mean():.0%}" if len(c["main"]) else "-"
+        share = f"{c['main'].mean():.1%}" if len(c["main"]) else "-"
         head = f"{c['index']:>5} {c['score']:>13.1f} {share:>12}"
         m = c["main"]
         if m.sum() > 2:
@@ -209,13 +209,13 @@ def ambiguity_figure(path, chains, d_true, true_obj) -> None:
     ax1.set_xlabel("across the ray (m)")
     ax1.set_ylabel("along the ray (m)")
     ax1.set_title("every chain: the cube's centre from above, after burn-in", fontsize=10)
-    _legend(ax1)
+    _legend(ax1, loc="upper left")
     fig.savefig(path, dpi=80)
 
 
-def _legend(ax) -> None:
+def _legend(ax, loc: str = "best") -> None:
     """A legend whose scatter dots are big enough to see the colour (the star stays as is)."""
-    legend = ax.legend(fontsize=7, frameon=False)
+    legend = ax.legend(fontsize=7, frameon=False, loc=loc)
     for handle in legend.legend_handles:
         if hasattr(handle, "set_sizes"):
             handle.set_sizes([16])
