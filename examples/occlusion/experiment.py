@@ -39,13 +39,15 @@ def main(argv=None) -> int:
     p.add_argument("--steps", type=int, default=8000, help="sweeps per chain (default 8000)")
     p.add_argument("--chains", type=int, default=2, help="chains (default 2)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--quick", action="store_true", help="300 sweeps: checks the script runs")
+    p.add_argument("--quick", action="store_true",
+                   help="300 sweeps and fewer prior draws: checks the script runs")
     p.add_argument("--work", type=Path, default=ROOT / "runs" / "occlusion",
                    help="where the observation and the run go (default runs/occlusion)")
     p.add_argument("--images", type=Path, default=ROOT / "docs" / "images",
                    help="where the figures go (default docs/images)")
     args = p.parse_args(argv)
     steps = 300 if args.quick else args.steps
+    prior_draws = PRIOR_DRAWS // 10 if args.quick else PRIOR_DRAWS
     model_path = ROOT / "models" / "shapes.scn"
 
     obs = experiment.simulate(model_path, HERE / "cameras.json", HERE / "scene.json",
@@ -72,7 +74,7 @@ def main(argv=None) -> int:
     behind = [shadow.objects_in(s["objects"]) for s in samples]
     rng = np.random.default_rng(0)
     prior = [shadow.objects_in([o.as_dict() for o in sample_objects(model, rng)])
-             for _ in range(PRIOR_DRAWS)]
+             for _ in range(prior_draws)]
     mp = summary["map"]["objects"]
 
     def row(label, sets, note=""):
@@ -88,7 +90,7 @@ def main(argv=None) -> int:
           f"{shadow.far:g} m of the camera")
     print(f"{'':<26} {'P(object in':>12} {'P(a cone':>10} {'P(a green cone':>16}")
     print(f"{'':<26} {'the shadow)':>12} {'there)':>10} {'there)':>16}")
-    row("prior", prior, f"({PRIOR_DRAWS} draws from the model's prior)")
+    row("prior", prior, f"({prior_draws} draws from the model's prior)")
     row("posterior", behind, f"({len(samples)} samples, {args.chains} chains after burn-in)")
     row("MAP scene", [shadow.objects_in(mp)])
     cones = [o for b in behind for o in b if o["class"] == "cone"]
