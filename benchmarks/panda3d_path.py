@@ -2,7 +2,8 @@
 back to numpy and scoring there (Gaussian statistics of every pixel, as the reference path).
 
 Optional: ``pip install panda3d`` (or the ``bench`` extra). ``available()`` says why not when
-it cannot be used. It draws the same unit meshes as sppl, with Panda3D's own lighting.
+it cannot be used. It draws sppl's unit meshes (spheres as their 1280-triangle icosphere,
+which sppl ray-casts instead), with Panda3D's own lighting.
 
 Panda3D makes its own GL context current on the thread that renders, which would redirect
 moderngl's calls, so it runs in a worker process of its own (``Worker``).
@@ -12,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sppl.render.renderer import flat_vertices
+from sppl.render.renderer import mesh_vertices
 
 _WHY_NOT: str | None = None
 try:
@@ -44,7 +45,7 @@ def _mat(m: np.ndarray) -> LMatrix4f:
 
 
 def _geom(primitive: str) -> GeomNode:
-    vertices = flat_vertices(primitive)
+    vertices = mesh_vertices(primitive)
     data = GeomVertexData(primitive, GeomVertexFormat.get_v3n3(), Geom.UH_static)
     data.unclean_set_num_rows(len(vertices))
     memoryview(data.modify_array(0)).cast("B").cast("f")[:] = vertices.ravel()

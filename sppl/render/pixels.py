@@ -32,7 +32,7 @@ from ..geometry import Part
 from ..model import RenderSettings
 from .bounds import Rect, closed, meets
 from .context import gl_context
-from .renderer import FLIP_Y, _column_major, _shader, flat_vertices
+from .renderer import FLIP_Y, RAY_CAST, VERTEX_FORMAT, _column_major, flat_vertices, programs
 
 if TYPE_CHECKING:
     from .drawlist import Drawn
@@ -91,18 +91,17 @@ class PixelScorer:
     def __init__(self, settings: RenderSettings, cameras: Sequence[Camera], observed) -> None:
         self.ctx = ctx = gl_context()
         self.cameras = list(cameras)
-        try:
-            self.program = ctx.program(vertex_shader=_shader("terms.vert"),
-                                       fragment_shader=_shader("terms.frag"))
-        except moderngl.Error as error:
-            raise RenderError(f"the scoring shaders did not compile on this GL driver: {error}")
+        self._programs = programs(ctx, "terms.vert", "terms.frag")
         light = np.asarray(settings.light, dtype=float)
-        self.program["light"].value = tuple(light / np.linalg.norm(light))
-        self.program["ambient"].value = float(settings.ambient)
-        self.program["background"].value = tuple(float(c) for c in settings.background)
-        self.program["observed"].value = 0
-        self._uniforms = {n: self.program[n] for n in ("view", "projection", "ray_depth",
-                                                        "depth_max")}
+        self._uniforms = {}
+        for sphere, program in self._programs.items():
+            program["light"].value = tuple(light / np.linalg.norm(light))
+            program["ambient"].value = float(settings.ambient)
+            program["background"].value = tuple(float(c) for c in settings.background)
+            program["observed"].value = 0
+            names = ("view", "projection", "ray_depth", "depth_max")
+            names += ("intrinsics", "near") if sphere else ()
+            self._uniforms[sphere] = [program[n] for n in names]
         self._meshes = {}
         limit = ctx.info["GL_MAX_TEXTURE_SIZE"]
         self.observed = []
@@ -118,10 +117,11 @@ class PixelScorer:
             texture = ctx.texture((camera.width, camera.height), 4, texels.tobytes(), dtype="f4")
             texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
             self.observed.append(texture)
-        # Per camera: the uniform bytes of its pass, computed once.
+        # Per camera: the uniform values of its pass, computed once.
         self._camera_uniforms = [
             (_column_major(c.w2c), _column_major(FLIP_Y @ c.projection()),
-             c.depth_type == "ray", float(c.depth_max)) for c in self.cameras
+             c.depth_type == "ray", float(c.depth_max), (c.fx, c.fy, c.cx, c.cy), float(c.near))
+            for c in self.cameras
         ]
         # Summing an image's two channels is a product with a 0/1 matrix: in float64 it is
         # exact to rounding, and far faster than numpy's strided sums.
@@ -194,9 +194,8 @@ class PixelScorer:
         for slot in self._slots:
             for obj in [*slot.vaos.values(), *slot.buffers.values()]:
                 obj.release()
-        for obj in [*self._meshes.values(), *self.observed]:
+        for obj in [*self._meshes.values(), *self.observed, *self._programs.values()]:
             obj.release()
-        self.program.release()
         self._targets, self._slots, self._meshes, self.observed = [], [], {}, []
 
     # -- helpers -------------------------------------------------------------------------------
@@ -218,12 +217,13 @@ class PixelScorer:
                    and (region is None or meets(d.rects[c], region))]
         if not visible:
             return
-        view, projection, ray, depth_max = self._camera_uniforms[c]
-        u = self._uniforms
-        u["view"].write(view)
-        u["projection"].write(projection)
-        u["ray_depth"].value = ray
-        u["depth_max"].value = depth_max
+        values = self._camera_uniforms[c]
+        for uniforms in self._uniforms.values():
+            for uniform, value in zip(uniforms, values):  # the sphere program's two more
+                if isinstance(value, bytes):
+                    uniform.write(value)
+                else:
+                    uniform.value = value
         self.observed[c].use(location=0)
         # Back faces of closed parts are hidden behind their front faces unless the camera
         # is inside a part: the same rule as Renderer's, so the same pixels.
@@ -249,8 +249,9 @@ class PixelScorer:
         buffer = slot.buffers.get(primitive)
         if buffer is None:
             buffer = slot.buffers[primitive] = self.ctx.buffer(reserve=max(nbytes, 1024))
-            slot.vaos[primitive] = self.ctx.vertex_array(self.program, [
-                (self._mesh(primitive), "3f 3f", "in_position", "in_normal"),
+            sphere = primitive in RAY_CAST
+            slot.vaos[primitive] = self.ctx.vertex_array(self._programs[sphere], [
+                (self._mesh(primitive), *VERTEX_FORMAT[sphere]),
                 (buffer, INSTANCE_FORMAT, "i_model", "i_normal", "i_colour"),
             ])
         elif buffer.size < nbytes:

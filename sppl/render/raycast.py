@@ -2,7 +2,9 @@
 
 It shares only the unit meshes and the camera with the OpenGL renderer, and derives everything
 else independently (normals from the posed triangles' edges, depth from the hit distance), so
-that it can serve as the oracle the fast path is tested against. Meant for tiny images.
+that it can serve as the oracle the fast path is tested against. Spheres, which the renderer
+ray-casts exactly, are intersected exactly here too, in double precision (``_sphere_hits``).
+Meant for tiny images.
 """
 
 from __future__ import annotations
@@ -37,16 +39,26 @@ def raycast(
 
     nearest = np.full(h * w, np.inf)  # distance along each ray to the nearest hit
     rgb = np.tile(np.asarray(settings.background, dtype=float), (h * w, 1))
+    colour_of = lambda part, normals: np.asarray(part.colour, dtype=float)[None, :] * (  # noqa: E731
+        settings.ambient + (1.0 - settings.ambient) * np.maximum(normals @ light, 0.0))[:, None]
     for part in parts:
+        if part.primitive == "sphere":
+            # The GL renderer clips at its near plane, a plane of constant z: a ray's hits
+            # count from the z-depth ``near`` on.
+            t, normals = _sphere_hits(part, origin, directions, camera.near / (directions @ forward))
+            if normals is None:
+                continue
+            closer = t < nearest
+            nearest[closer] = t[closer]
+            rgb[closer] = colour_of(part, normals[closer])
+            continue
         triangles, normals = _posed_triangles(part)
         if len(triangles) == 0:
             continue
-        shade = settings.ambient + (1.0 - settings.ambient) * np.maximum(normals @ light, 0.0)
-        colours = np.asarray(part.colour, dtype=float)[None, :] * shade[:, None]
+        colours = colour_of(part, normals)
         for start in range(0, h * w, BATCH):
             rays = slice(start, start + BATCH)
             t, face = _nearest_hits(origin, directions[rays], triangles)
-            # The GL renderer clips at its near plane, which is a plane of constant z.
             t[t * (directions[rays] @ forward) <= camera.near] = np.inf
             closer = t < nearest[rays]
             nearest[rays][closer] = t[closer]  # slices are views: these write through
@@ -57,6 +69,36 @@ def raycast(
     along = nearest if camera.depth_type == "ray" else nearest * (directions @ forward)
     depth[hit] = np.minimum(along[hit], camera.depth_max)
     return rgb.reshape(h, w, 3).astype("f4"), depth.reshape(h, w).astype("f4")
+
+
+def _sphere_hits(part: Part, origin, directions, start):
+    """The distance along each unit ray to the part's sphere (inf for a miss), counting only
+    hits at least ``start`` (per ray) along it, and the outward unit normals (N, 3) there;
+    (None, None) for a part with no volume. The unit sphere has radius 1 and centre (0, 0, 1)."""
+    matrix = np.asarray(part.matrix, dtype=float)
+    linear = matrix[:3, :3]
+    if abs(np.linalg.det(linear)) < 1e-12:
+        return None, None
+    unit_from_world = np.linalg.inv(linear)
+    o = unit_from_world @ (origin - matrix[:3, 3]) - (0.0, 0.0, 1.0)
+    d = directions @ unit_from_world.T
+    # |o + t d|^2 = 1, a quadratic in t.
+    a = np.einsum("nk,nk->n", d, d)
+    b = d @ o
+    c = o @ o - 1.0
+    discriminant = b * b - a * c
+    t = np.full(len(d), np.inf)
+    hit = discriminant >= 0.0
+    root = np.sqrt(discriminant[hit])
+    near, far = (-b[hit] - root) / a[hit], (-b[hit] + root) / a[hit]
+    first = np.where(near > start[hit], near, np.where(far > start[hit], far, np.inf))
+    t[hit] = first
+    unit_normals = np.tile((0.0, 0.0, 1.0), (len(d), 1))
+    found = np.isfinite(t)
+    unit_normals[found] = o + t[found, None] * d[found]
+    normals = unit_normals @ unit_from_world  # the inverse-transpose applied to each normal
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    return t, normals
 
 
 def _posed_triangles(part: Part) -> tuple[np.ndarray, np.ndarray]:

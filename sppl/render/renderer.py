@@ -3,6 +3,12 @@
 Each primitive's unit mesh lives on the GPU once; a part is drawn as that mesh under its own
 matrix and colour, so a new hypothesis costs a few uniform writes, not a mesh upload. Images come
 back as float32 arrays in the camera's conventions (see ``sppl.camera``).
+
+Spheres are the exception (``RAY_CAST``): a tessellated sphere needs a thousand triangles to look
+round, and on a software rasteriser their setup costs more than all the other shapes' pixels.
+A sphere is drawn as an inside-out bounding box, and the fragment shader intersects each
+pixel's ray with the exact (affinely posed) sphere (``shaders/sphere.glsl``), which is both
+cheaper and exact.
 """
 
 from __future__ import annotations
@@ -13,6 +19,7 @@ from importlib import resources
 
 import moderngl
 import numpy as np
+import trimesh
 
 from ..camera import Camera
 from ..errors import RenderError
@@ -26,8 +33,33 @@ from .context import gl_context
 FLIP_Y = np.diag([1.0, -1.0, 1.0, 1.0])
 
 
-def _shader(name: str) -> str:
-    return resources.files(__package__).joinpath("shaders", name).read_text(encoding="utf-8")
+# Primitives whose surface the fragment shader ray-casts exactly over a proxy mesh.
+RAY_CAST = frozenset({"sphere"})
+
+
+# The vertex rows' layout as each program reads it: a proxy's normals are not used.
+VERTEX_FORMAT = {False: ("3f 3f", "in_position", "in_normal"), True: ("3f 3x4", "in_position")}
+
+
+def _shader(name: str, sphere: bool = False) -> str:
+    """A shader's source; with ``sphere``, its variant that ray-casts spheres."""
+    text = resources.files(__package__).joinpath("shaders", name).read_text(encoding="utf-8")
+    if not sphere:
+        return text
+    version, _, body = text.partition("\n")
+    extra = _shader("sphere.glsl") if name.endswith(".frag") else ""
+    return f"{version}\n#define SPHERE\n{extra}\n{body}"
+
+
+def programs(ctx: moderngl.Context, vertex: str, fragment: str) -> dict[bool, moderngl.Program]:
+    """The mesh program (False) and the sphere program (True) of a pair of shaders."""
+    try:
+        return {sphere: ctx.program(vertex_shader=_shader(vertex, sphere),
+                                    fragment_shader=_shader(fragment, sphere))
+                for sphere in (False, True)}
+    except moderngl.Error as error:
+        raise RenderError(f"the shaders {vertex} and {fragment} did not compile on this GL "
+                          f"driver: {error}") from None
 
 
 def _column_major(matrix: np.ndarray) -> bytes:
@@ -35,13 +67,34 @@ def _column_major(matrix: np.ndarray) -> bytes:
     return np.asarray(matrix, dtype="f4").tobytes(order="F")
 
 
-def flat_vertices(primitive: str) -> np.ndarray:
+def mesh_vertices(primitive: str) -> np.ndarray:
     """Non-indexed triangles of a unit mesh, as (3F, 6) rows of position and face normal.
 
     Shared vertices would average their normals and smooth the box's edges away; repeating each
     vertex per face keeps every face flat.
     """
-    mesh = unit_mesh(primitive)
+    return _facets(unit_mesh(primitive))
+
+
+def flat_vertices(primitive: str) -> np.ndarray:
+    """What the renderers draw for a primitive: its unit mesh's facets, or for a ray-cast
+    primitive the proxy that reaches its pixels."""
+    if primitive in RAY_CAST:
+        return _facets(_proxy(primitive))
+    return mesh_vertices(primitive)
+
+
+def _proxy(primitive: str):
+    """The unit shape's bounding box turned inside out: its far faces are the front ones, so
+    that back-face culling keeps them, and they cover the shape's pixels even for a camera
+    inside the box."""
+    lo, hi = unit_mesh(primitive).bounds
+    box = trimesh.creation.box(bounds=(lo, hi))
+    box.invert()
+    return box
+
+
+def _facets(mesh) -> np.ndarray:
     positions = mesh.triangles.reshape(-1, 3)
     normals = np.repeat(mesh.face_normals, 3, axis=0)
     return np.hstack([positions, normals]).astype("f4")
@@ -76,30 +129,15 @@ class Renderer:
         if not np.all(np.isfinite(light)) or np.linalg.norm(light) == 0.0:
             raise RenderError(f"the light direction {tuple(light)} is not a nonzero vector")
         self.ctx = gl_context()
-        try:
-            self.program = self.ctx.program(
-                vertex_shader=_shader("scene.vert"), fragment_shader=_shader("scene.frag")
-            )
-        except moderngl.Error as error:
-            raise RenderError(f"the scene shaders did not compile on this GL driver: {error}")
-        self.program["light"].value = tuple(light / np.linalg.norm(light))
-        self.program["ambient"].value = float(self.settings.ambient)
-        # Looked up once, so that a frame only writes through them.
-        self._model = self.program["model"]
-        self._normal_matrix = self.program["normal_matrix"]
-        self._colour = self.program["colour"]
-        self._view = self.program["view"]
-        self._projection = self.program["projection"]
-        self._ray_depth = self.program["ray_depth"]
-        self._depth_max = self.program["depth_max"]
+        self._programs = programs(self.ctx, "scene.vert", "scene.frag")
+        self.program = self._programs[False]
+        for program in self._programs.values():
+            program["light"].value = tuple(light / np.linalg.norm(light))
+            program["ambient"].value = float(self.settings.ambient)
         self._buffers: dict[str, moderngl.Buffer] = {}
         self._vaos: dict[str, moderngl.VertexArray] = {}
         for primitive in PRIMITIVES:
-            buffer = self.ctx.buffer(flat_vertices(primitive).tobytes())
-            self._buffers[primitive] = buffer
-            self._vaos[primitive] = self.ctx.vertex_array(
-                self.program, [(buffer, "3f 3f", "in_position", "in_normal")]
-            )
+            self._upload(primitive)
         self._targets: dict[tuple[int, int], _Target] = {}
 
     def render(self, parts: Iterable[Part], camera: Camera) -> tuple[np.ndarray, np.ndarray]:
@@ -114,10 +152,16 @@ class Renderer:
         target.scene.use()
         # The context is shared with other users in the process; set every state this pass needs.
         self.ctx.enable_only(moderngl.DEPTH_TEST)
-        self._view.write(_column_major(camera.w2c))
-        self._projection.write(_column_major(FLIP_Y @ camera.projection()))
-        self._ray_depth.value = camera.depth_type == "ray"
-        self._depth_max.value = float(camera.depth_max)
+        view = _column_major(camera.w2c)
+        projection = _column_major(FLIP_Y @ camera.projection())
+        for sphere, program in self._programs.items():
+            program["view"].write(view)
+            program["projection"].write(projection)
+            program["ray_depth"].value = camera.depth_type == "ray"
+            program["depth_max"].value = float(camera.depth_max)
+            if sphere:
+                program["intrinsics"].value = (camera.fx, camera.fy, camera.cx, camera.cy)
+                program["near"].value = float(camera.near)
         parts = list(parts)
         # Back faces of closed parts are hidden behind their front faces, so they are not
         # drawn (unless the camera may be inside a part). Drawing them anyway let a few
@@ -151,11 +195,10 @@ class Renderer:
         """Free this renderer's GL objects (the shared context stays)."""
         for target in self._targets.values():
             target.release()
-        for obj in [*self._vaos.values(), *self._buffers.values()]:
+        for obj in [*self._vaos.values(), *self._buffers.values(), *self._programs.values()]:
             obj.release()
-        if self.program is not None:
-            self.program.release()
-        self._targets, self._vaos, self._buffers, self.program = {}, {}, {}, None
+        self._targets, self._vaos, self._buffers, self._programs = {}, {}, {}, {}
+        self.program = None
 
     def _draw(self, part: Part) -> None:
         vao = self._vaos.get(part.primitive)
@@ -166,14 +209,15 @@ class Renderer:
             normal_matrix = np.linalg.inv(linear).T
         except np.linalg.LinAlgError:
             return  # a part scaled to zero thickness encloses nothing; the ray caster agrees
-        self._model.write(_column_major(part.matrix))
-        self._normal_matrix.write(_column_major(normal_matrix))
-        self._colour.value = tuple(float(c) for c in part.colour)
+        program = self._programs[part.primitive in RAY_CAST]
+        program["model"].write(_column_major(part.matrix))
+        program["normal_matrix"].write(_column_major(normal_matrix))
+        program["colour"].value = tuple(float(c) for c in part.colour)
         vao.render(moderngl.TRIANGLES)
 
     def _upload(self, primitive: str) -> moderngl.VertexArray:
-        """Upload a mesh the first time a part uses it (meshes loaded from files)."""
-        if not primitive.startswith(MESH_PREFIX):
+        """Upload a primitive's mesh (a mesh file's the first time a part uses it)."""
+        if primitive not in PRIMITIVES and not primitive.startswith(MESH_PREFIX):
             raise RenderError(
                 f"unknown primitive {primitive!r}; expected one of {', '.join(PRIMITIVES)}"
             )
@@ -184,7 +228,7 @@ class Renderer:
         buffer = self.ctx.buffer(vertices.tobytes())
         self._buffers[primitive] = buffer
         self._vaos[primitive] = self.ctx.vertex_array(
-            self.program, [(buffer, "3f 3f", "in_position", "in_normal")]
+            self._programs[primitive in RAY_CAST], [(buffer, *VERTEX_FORMAT[primitive in RAY_CAST])]
         )
         return self._vaos[primitive]
 

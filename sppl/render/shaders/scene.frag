@@ -8,13 +8,30 @@ uniform float depth_max;
 
 in vec3 v_normal;
 in vec3 v_camera;
+#ifdef SPHERE
+uniform mat3 normal_matrix;
+uniform mat4 projection;
+flat in vec3 v_origin;
+flat in mat3 v_unit_from_camera;
+#endif
 
 layout(location = 0) out vec4 out_colour;
 layout(location = 1) out float out_depth;
 
 void main() {
-    float lambert = max(dot(normalize(v_normal), light), 0.0);
+    vec3 normal = v_normal;
+    vec3 camera_point = v_camera;
+#ifdef SPHERE
+    vec3 ray = pixel_ray();
+    float t;
+    vec3 unit_normal;
+    if (!sphere_hit(v_origin, v_unit_from_camera, ray, t, unit_normal)) discard;
+    camera_point = t * ray;
+    normal = normal_matrix * unit_normal;
+    gl_FragDepth = window_depth(projection, camera_point);
+#endif
+    float lambert = max(dot(normalize(normal), light), 0.0);
     out_colour = vec4(colour * (ambient + (1.0 - ambient) * lambert), 1.0);
-    float depth = ray_depth ? length(v_camera) : -v_camera.z;
+    float depth = ray_depth ? length(camera_point) : -camera_point.z;
     out_depth = min(depth, depth_max);
 }

@@ -14,13 +14,30 @@ uniform sampler2D observed;  // rgb (r < 0: no RGB term), depth in alpha (< 0: m
 in vec3 v_normal;
 in vec3 v_camera;
 flat in vec3 v_colour;
+#ifdef SPHERE
+uniform mat4 projection;
+flat in vec3 v_origin;
+flat in mat3 v_unit_from_camera;
+flat in mat3 v_normal_matrix;
+#endif
 
 layout(location = 0) out vec2 out_terms;  // (image term, depth term)
 
 void main() {
-    float lambert = max(dot(normalize(v_normal), light), 0.0);
+    vec3 normal = v_normal;
+    vec3 camera_point = v_camera;
+#ifdef SPHERE
+    vec3 ray = pixel_ray();
+    float t;
+    vec3 unit_normal;
+    if (!sphere_hit(v_origin, v_unit_from_camera, ray, t, unit_normal)) discard;
+    camera_point = t * ray;
+    normal = v_normal_matrix * unit_normal;
+    gl_FragDepth = window_depth(projection, camera_point);
+#endif
+    float lambert = max(dot(normalize(normal), light), 0.0);
     vec3 colour = v_colour * (ambient + (1.0 - ambient) * lambert);
-    float depth = ray_depth ? length(v_camera) : -v_camera.z;
+    float depth = ray_depth ? length(camera_point) : -camera_point.z;
     depth = min(depth, depth_max);
     vec4 o = texelFetch(observed, ivec2(gl_FragCoord.xy), 0);
     float image = 0.0;
