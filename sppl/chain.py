@@ -13,10 +13,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import moves
+from . import moves, tries
 from .birth import BirthProposal
 from .model import Model
 from .trace import Trace, noise_log_prior, objects_log_prior, overlaps_any
+from .warmup import Warmup
 
 
 @dataclass
@@ -71,6 +72,7 @@ class Sampler:
         self.stats = MoveStats()
         self.jump = moves.jump_probabilities(model)
         self.birth = BirthProposal(model, scorer if getattr(scorer, "terms", None) else None)
+        self.warmup = Warmup.of(model.inference)
 
     # -- states --------------------------------------------------------------------------------
 
@@ -143,8 +145,15 @@ class Sampler:
         return new if accepted else trace
 
     def log_alpha(self, trace: Trace, proposal: moves.Proposal, new: Trace) -> float:
-        """log of the Metropolis-Hastings ratio of moving from ``trace`` to ``new``."""
-        log_alpha = new.score - trace.score + proposal.log_q_ratio
+        """log of the Metropolis-Hastings ratio of moving from ``trace`` to ``new`` (during an
+        annealed warm-up, with the likelihood raised to the warm-up's power)."""
+        beta = self.warmup.beta
+        if beta == 1.0:
+            log_alpha = new.score - trace.score
+        else:
+            log_alpha = (new.log_prior - trace.log_prior
+                         + beta * (new.log_likelihood - trace.log_likelihood))
+        log_alpha += proposal.log_q_ratio
         if proposal.ratio_fn is not None:
             log_alpha += proposal.ratio_fn(new)
         return log_alpha
@@ -155,12 +164,13 @@ class Sampler:
         m, rng = self.model, self.rng
         for k in range(len(trace.objects)):
             for block in moves.parameter_blocks(trace.objects[k].cls):
-                trace = self.step(trace, moves.propose_parameters(m, trace, k, block, rng))
+                trace = self._parameter_step(trace, k, block)
         if rng.random() < m.inference.p_jump:
             trace = self.step(trace, self.propose_jump(trace))
         for kind, sensor in m.sensors.items():
             for p in sensor.noise:
-                trace = self.step(trace, moves.propose_noise(m, trace, kind, p.name, rng))
+                trace = self._noise_step(trace, kind, p.name)
+        self.warmup.sweep += 1
         return trace
 
     def adjoint_sweep(self, trace: Trace) -> Trace:
@@ -174,16 +184,51 @@ class Sampler:
         m, rng = self.model, self.rng
         for kind, sensor in reversed(list(m.sensors.items())):
             for p in reversed(sensor.noise):
-                trace = self.step(trace, moves.propose_noise(m, trace, kind, p.name, rng))
+                trace = self._noise_step(trace, kind, p.name)
         if rng.random() < m.inference.p_jump:
             trace = self.step(trace, self.propose_jump(trace))
         for k in reversed(range(len(trace.objects))):
             for block in reversed(moves.parameter_blocks(trace.objects[k].cls)):
-                trace = self.step(trace, moves.propose_parameters(m, trace, k, block, rng))
+                trace = self._parameter_step(trace, k, block)
+        self.warmup.sweep += 1
         return trace
+
+    def _parameter_step(self, trace: Trace, k: int, block: tuple[str, ...]) -> Trace:
+        site = f"{trace.objects[k].cls.name}/{'+'.join(block)}"
+        proposal = moves.propose_parameters(self.model, trace, k, block, self.rng,
+                                            self.warmup.factor(site))
+        new = self.step(trace, proposal)
+        if trace.objects[k].cls.parameter(block[0]).continuous:
+            self.warmup.record(site, new is not trace)
+        return new
+
+    def _noise_step(self, trace: Trace, kind: str, name: str) -> Trace:
+        site = f"noise/{kind}.{name}"
+        proposal = moves.propose_noise(self.model, trace, kind, name, self.rng,
+                                       self.warmup.factor(site))
+        new = self.step(trace, proposal)
+        self.warmup.record(site, new is not trace)
+        return new
+
+    # -- what a checkpoint keeps beyond the trace and the generator ----------------------------
+
+    def state_dict(self) -> dict:
+        return {"warmup": self.warmup.state_dict()}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.warmup.load_state_dict(state["warmup"])
 
     def propose_jump(self, trace: Trace) -> moves.Proposal | None:
         u = self.rng.random()
+        m = self.model.inference.tries
+        if m > 1:  # multiple-try births, deaths and replaces (sppl.tries)
+            if u < self.jump["birth"]:
+                return tries.propose_birth(self, trace, self.rng, m)
+            if u < self.jump["birth"] + self.jump["death"]:
+                return tries.propose_death(self, trace, self.rng, m)
+            if u >= 1.0 - self.jump["replace"]:
+                return tries.propose_replace(self, trace, self.rng, m)
+            return moves.propose_change(self.model, trace, self.rng)
         if u < self.jump["birth"]:
             return moves.propose_birth(self.model, trace, self.rng, self.birth)
         if u < self.jump["birth"] + self.jump["death"]:

@@ -92,6 +92,9 @@ class ObjectClass:
     # Declared change-of-class correspondences: {other class: {parameter here: parameter
     # there}}, carried as-is by a change between the two classes (sppl.moves).
     correspondences: Mapping[str, Mapping[str, str]] = field(default_factory=dict)
+    # Of those, the ones carried scaled: {other class: {parameter here: factor}}, where the
+    # value here is the factor times the value there (sppl.moves.carried_scales).
+    correspondence_scales: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
 
     def parameter(self, name: str) -> Parameter | None:
         for p in self.parameters:
@@ -169,6 +172,13 @@ class InferenceSettings:
     jump_weights: Mapping[str, float] = field(
         default_factory=lambda: {"birth": 1.0, "death": 1.0, "change": 1.0, "replace": 1.0}
     )
+    # The warm-up (sppl/warmup.py): sweeps of proposal-scale adaptation, and of an annealed
+    # likelihood rising from the power anneal_from to 1; both are burned and then stop.
+    adapt: int = 0
+    anneal: int = 0
+    anneal_from: float = 0.01
+    # Candidates a birth, death or replace weighs at once (sppl/tries.py); 1: single tries.
+    tries: int = 1
 
 
 @dataclass(frozen=True)

@@ -38,6 +38,9 @@ class Proposal:
     log_q_ratio: float = 0.0
     # The part of the ratio that depends on the proposed state's renders, if any.
     ratio_fn: Callable[[Trace], float] | None = None
+    # A multiple-try jump's other candidates and reference points (``sppl.tries``), which its
+    # reverse reuses.
+    tries: Any = None
 
 
 def jump_probabilities(model: Model) -> dict[str, float]:
@@ -94,6 +97,25 @@ def carried_parameters(old: ObjectClass, new: ObjectClass) -> dict[str, str]:
             if q.domain == p.domain and p.name not in old.correspondences.get(new.name, {}):
                 carried[p.name] = p.name
     return carried
+
+
+def carried_scales(old: ObjectClass, new: ObjectClass) -> dict[str, float]:
+    """For each parameter of ``new`` that a change from ``old`` carries, the factor its value
+    is the old one's times: 1 unless the model pairs the two with a factor
+    (``change a.p <-> k * b.q``). The reverse change has the reciprocal factors."""
+    scales = new.correspondence_scales.get(old.name, {})
+    return {p: float(scales.get(p, 1.0)) for p in carried_parameters(old, new)}
+
+
+def log_jacobian_change(old: ObjectClass, new: ObjectClass) -> float:
+    """log |det| of the map a change makes of the carried values: scaling a value by k
+    stretches the parameter space by k along it, which the acceptance ratio must count."""
+    return sum(math.log(k) for k in carried_scales(old, new).values())
+
+
+def _scaled(value, factor: float):
+    """A carried value times its factor; a factor of 1 copies it exactly (a colour too)."""
+    return value if factor == 1.0 else value * factor
 
 
 def log_q_change(
@@ -161,38 +183,43 @@ def propose_change(model: Model, trace: Trace, rng: np.random.Generator) -> Prop
     others = [c for c in model.classes if c is not old.cls]
     new_cls = others[int(rng.integers(len(others)))]
     carried = carried_parameters(old.cls, new_cls)
+    scales = carried_scales(old.cls, new_cls)
     # The dropped parameters are drawn from the new class's prior, in its dependency order,
     # given the carried ones.
-    values = new_cls.sample_prior(rng, given={n: old.values[q] for n, q in carried.items()})
+    values = new_cls.sample_prior(
+        rng, given={n: _scaled(old.values[q], scales[n]) for n, q in carried.items()})
     obj = make_object(model, new_cls, values)
     objects = trace.objects[:k] + (obj,) + trace.objects[k + 1 :]
-    ratio = log_q_change(model, n, new_cls, old.cls, old.values) - log_q_change(
-        model, n, old.cls, new_cls, values
-    )
+    ratio = (log_q_change(model, n, new_cls, old.cls, old.values)
+             - log_q_change(model, n, old.cls, new_cls, values)
+             + log_jacobian_change(old.cls, new_cls))
     return Proposal("change", old.cls.name, objects, trace.noise, (obj,), ratio)
 
 
 def propose_parameters(
-    model: Model, trace: Trace, k: int, names: tuple[str, ...], rng: np.random.Generator
+    model: Model, trace: Trace, k: int, names: tuple[str, ...], rng: np.random.Generator,
+    factor: float = 1.0,
 ) -> Proposal:
-    """A symmetric random-walk step of some parameters of object ``k`` (Algorithm 3)."""
+    """A symmetric random-walk step of some parameters of object ``k`` (Algorithm 3), each of
+    its declared step times ``factor`` (the warm-up's adapted scale, ``sppl.warmup``)."""
     old = trace.objects[k]
     values = dict(old.values)
     for name in names:
         p = old.cls.parameter(name)
-        values[name] = p.domain.step(values[name], p.proposal_scale, rng)
+        values[name] = p.domain.step(values[name], p.proposal_scale * factor, rng)
     obj = make_object(model, old.cls, values)
     objects = trace.objects[:k] + (obj,) + trace.objects[k + 1 :]
     return Proposal("parameters", old.cls.name, objects, trace.noise, (obj,))
 
 
 def propose_noise(
-    model: Model, trace: Trace, kind: str, name: str, rng: np.random.Generator
+    model: Model, trace: Trace, kind: str, name: str, rng: np.random.Generator,
+    factor: float = 1.0,
 ) -> Proposal:
     """A symmetric random-walk step of one noise parameter (thesis section 4.2)."""
     p = next(q for q in model.sensors[kind].noise if q.name == name)
     noise = {k: dict(v) for k, v in trace.noise.items()}
-    noise[kind][name] = p.domain.step(noise[kind][name], p.proposal_scale, rng)
+    noise[kind][name] = p.domain.step(noise[kind][name], p.proposal_scale * factor, rng)
     return Proposal("noise", kind, trace.objects, noise, ())
 
 
@@ -249,9 +276,9 @@ def reverse(
         ratio = 0.0  # parameter steps are symmetric
         if proposal.move == "change":
             n = len(objects)
-            ratio = log_q_change(model, n, old.cls, new.cls, new.values) - log_q_change(
-                model, n, new.cls, old.cls, old.values
-            )
+            ratio = (log_q_change(model, n, old.cls, new.cls, new.values)
+                     - log_q_change(model, n, new.cls, old.cls, old.values)
+                     + log_jacobian_change(new.cls, old.cls))
         return Proposal(proposal.move, new.cls.name, objects, after.noise, (old,), ratio)
     if proposal.move == "noise":
         return Proposal("noise", proposal.label, after.objects, before.noise, ())

@@ -30,6 +30,7 @@ from .model import Model
 from .observations import Observations
 from .samples import SampleWriter, format_summary, read_samples, summarise, truncate_samples
 from .scoring import Scorer
+from .warmup import warmup_sweeps
 
 
 CHECKPOINT_SECONDS = 30.0  # how often a chain saves its full state (``--checkpoint-every``)
@@ -114,7 +115,9 @@ def run_chain(
     rng = np.random.default_rng(seed_sequence)
     seed = _seed_record(seed)
     sampler = Sampler(model, scorer, rng)
+    # The warm-up's sweeps (adaptation, annealing) never count as samples of the posterior.
     burn_option, burn = burn, steps // 2 if burn is None else burn
+    burn = max(burn, warmup_sweeps(model.inference))
     state = read_checkpoint(out) if resume else None
     meta = {
         "sppl_version": __version__,
@@ -194,7 +197,7 @@ def run_chain(
         model.class_names,
         map_sample,
         sampler.stats.as_dict(),
-        burn=min(burn, done // 2) if interrupted else burn,
+        burn=max(min(burn, done // 2), warmup_sweeps(model.inference)) if interrupted else burn,
         extra={"steps_done": done, "seconds": seconds, "interrupted": interrupted, "seed": seed,
                "resumed_from": start if state is not None else None},
     )

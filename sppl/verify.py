@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from . import moves
+from . import moves, tries
 from .camera import Camera, focal_from_fov, look_at
 from .chain import Sampler
 from .domains import Finite, Integer
@@ -59,6 +59,7 @@ from .observations import CameraSpec, Frame, Observations
 from .scoring import PriorScorer, Scorer
 from .simulate import sample_noise, sample_objects
 from .trace import Trace
+from .warmup import Warmup, warmup_sweeps
 
 ALPHA = 0.01
 # Prior recovery keeps one draw every THIN * tau sweeps, tau a quantity's integrated
@@ -335,6 +336,10 @@ def prior_recovery(
     rng = np.random.default_rng(chain_seq)
     sampler = sampler_factory(m, PriorScorer(), rng)
     trace = sampler.initial_trace(sample_objects(m, rng))
+    # The model's warm-up (adapted steps) runs first and is not recorded: what is checked is
+    # the kernel the chain keeps after it, with the scales it adapted.
+    for _ in range(warmup_sweeps(m.inference)):
+        trace = sampler.sweep(trace)
     states = []
     for _ in range(sweeps):
         trace = sampler.sweep(trace)
@@ -599,11 +604,27 @@ class _Simulator:
             frames.append(frame)
         return Observations(Path("."), frames)
 
-    def sampler(self, observations, rng, factory, stats=None) -> Sampler:
+    def sampler(self, observations, rng, factory, stats=None, warmup=None) -> Sampler:
         sampler = factory(self.model, Scorer(self.model, observations, self.renderer), rng)
         if stats is not None:
             sampler.stats = stats
+        if warmup is not None:
+            sampler.warmup = warmup
         return sampler
+
+
+def _finished_warmup(model: Model, rng) -> Warmup | None:
+    """The state a chain's warm-up leaves (its adapted steps, annealing over), for checks that
+    test the kernel after it: the warm-up run on a chain without observations. None when the
+    model has no warm-up."""
+    n = warmup_sweeps(model.inference)
+    if not n:
+        return None
+    sampler = Sampler(model, PriorScorer(), rng)
+    trace = sampler.initial_trace(sample_objects(model, rng))
+    for _ in range(n):
+        trace = sampler.sweep(trace)
+    return sampler.warmup
 
 
 def _trace_with(sampler: Sampler, objects, noise, renders, log_prior=None) -> Trace:
@@ -697,18 +718,20 @@ def geweke(
 
     sc = np.empty((chains, len(quantities)))
     stats_ = None
+    warmup = _finished_warmup(m, np.random.default_rng(mc_seq.spawn(1)[0]))
     data_births = [0, 0]
     for r, chain_seq in enumerate(sc_seq.spawn(chains)):
         rng = np.random.default_rng(chain_seq)
         objs, noise = sample_objects(m, rng), sample_noise(m, rng)
         renders = sim.render(objs)
-        sampler = sim.sampler(sim.observe(renders, noise, rng), rng, sampler_factory, stats_)
+        sampler = sim.sampler(sim.observe(renders, noise, rng), rng, sampler_factory, stats_,
+                              warmup)
         stats_ = sampler.stats
         trace = _trace_with(sampler, objs, noise, renders)
         for t in range(length):
             if t:
                 sampler = sim.sampler(sim.observe(trace.renders, trace.noise, rng), rng,
-                                      sampler_factory, stats_)
+                                      sampler_factory, stats_, warmup)
                 trace = _trace_with(sampler, trace.objects, trace.noise, trace.renders,
                                     trace.log_prior)
             _count_data_births(sampler, data_births)
@@ -780,8 +803,11 @@ def check_reverse(sampler: Sampler, trace: Trace, proposal) -> tuple[float, floa
     if new is None:
         return None
     forward = sampler.log_alpha(trace, proposal, new)
-    rev = moves.reverse(sampler.model, trace, proposal, new, sampler.birth,
-                        without=lambda objs: sampler.make_trace(objs, new.noise))
+    if proposal.tries is not None:  # a multiple-try jump, undone with the same candidates
+        rev = tries.reverse(sampler, trace, proposal, new)
+    else:
+        rev = moves.reverse(sampler.model, trace, proposal, new, sampler.birth,
+                            without=lambda objs: sampler.make_trace(objs, new.noise))
     back = sampler.evaluate(new, rev)
     if back is None:
         return forward, -math.inf, False
@@ -906,6 +932,12 @@ def change_declarations(model: Model) -> list[Row]:
                 da, db = a.parameter(q).domain, b.parameter(p).domain
                 if da != db:
                     problems.append(f"{a.name}.{q} ({da.describe()}) -> {b.name}.{p} ({db.describe()})")
+            # A scaled pairing carries back only with the reciprocal factor.
+            there, back_scales = moves.carried_scales(a, b), moves.carried_scales(b, a)
+            for p, q in forward.items():
+                if q in back_scales and not math.isclose(there[p] * back_scales[q], 1.0):
+                    problems.append(f"{a.name}.{q} -> {b.name}.{p} is scaled by {there[p]:g} "
+                                    f"but back by {back_scales[q]:g}")
             observed = "; ".join(problems) or f"carries {_pairs(forward, a, b) or 'nothing'}"
             rows.append(Row("moves", f"change {a.name} <-> {b.name}: carries back",
                             "the same pairs both ways, equal domains", observed, None,
@@ -953,11 +985,14 @@ def sbc(
     quantities = list(quantities or scene_quantities(m))
     sim = _Simulator(m, verify_cameras(m, size), renderer)
     ranks = np.empty((replicates, len(quantities)), dtype=int)
-    for r, rep_seq in enumerate(_seq(seed).spawn(replicates)):
+    *replicate_seqs, warmup_seq = _seq(seed).spawn(replicates + 1)
+    warmup = _finished_warmup(m, np.random.default_rng(warmup_seq))
+    for r, rep_seq in enumerate(replicate_seqs):
         rng = np.random.default_rng(rep_seq)
         objs, noise = sample_objects(m, rng), sample_noise(m, rng)
         renders = sim.render(objs)
-        sampler = sim.sampler(sim.observe(renders, noise, rng), rng, sampler_factory)
+        sampler = sim.sampler(sim.observe(renders, noise, rng), rng, sampler_factory,
+                              warmup=warmup)
         truth = _trace_with(sampler, objs, noise, renders)
         j = int(rng.integers(draws + 1))
         values = [[f(truth.objects, truth.noise) for _, f, _ in quantities]]

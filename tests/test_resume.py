@@ -7,6 +7,7 @@ checkpoint, or was SIGKILLed at a random moment. Every comparison is exact: no t
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -304,3 +305,23 @@ def test_resume_continues_with_the_recorded_paths(setup, tmp_path, monkeypatch):
               progress=False)
     assert main(["sample", "--resume", "rel", "--steps", str(2 * STEPS), "-q"]) == 0
     assert read_samples(d / "rel" / "samples.jsonl") == reference
+
+
+def test_a_run_resumed_in_its_warm_up_draws_the_samples_of_an_uninterrupted_one(setup,
+                                                                                 tmp_path):
+    """The adapted steps and the annealing schedule are part of the chain's state: a run
+    stopped in the middle of its warm-up resumes with the same scales and powers."""
+    model, obs, _, _ = setup
+    warm = dataclasses.replace(model, inference=dataclasses.replace(
+        model.inference, adapt=3 * STEPS // 2, anneal=STEPS + 4))
+    reference = tmp_path / "reference"
+    run_chain(warm, obs, reference, steps=2 * STEPS, seed=SEED, progress=False)
+    out = tmp_path / "run"
+    run_chain(warm, obs, out, steps=STEPS, seed=SEED, progress=False)
+    state = json.loads((out / CHECKPOINT).read_text())["sampler"]["warmup"]
+    assert state["sweep"] == STEPS and state["log_factors"]
+    run_chain(warm, obs, out, steps=2 * STEPS, seed=SEED, progress=False, resume=True)
+    assert read_samples(out / "samples.jsonl") == read_samples(reference / "samples.jsonl")
+    # The warm-up is burned whatever --burn says.
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["burn"] == 3 * STEPS // 2

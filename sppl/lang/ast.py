@@ -218,10 +218,12 @@ class Ground:
 
 @dataclass(frozen=True)
 class Change:
-    """``change a.p <-> b.q``: a change of class between a and b carries p's value to q."""
+    """``change a.p <-> [k *] b.q``: a change of class between a and b carries p's value to
+    q, and back; with a factor k, a.p = k b.q."""
 
     first_class: Ident
     first: Ident
+    factor: Number | None
     second_class: Ident
     second: Ident
     span: Span

@@ -12,6 +12,7 @@ the ordering of a class's declarations in ``order.py``; priors and domains in ``
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -19,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from ..domains import Finite, Real
+from ..domains import Finite, Positive, Real
 from ..errors import ModelError, ModelErrors, Span, SpplError
 from ..geometry import Part
 from ..model import (
@@ -77,7 +78,8 @@ def compile_model(text: str, path: str | Path = DEFAULT_PATH) -> Model:
 _CONSTRAINTS = ("no_overlap", "max_objects")
 _SENSOR_KINDS = ("image", "depth")
 _RENDER_KEYS = ("background", "ambient", "light")
-_INFERENCE_KEYS = ("p_jump", "data_birth", "data_birth_spread")
+_INFERENCE_KEYS = ("p_jump", "data_birth", "data_birth_spread", "adapt", "anneal", "anneal_from",
+                   "tries")
 _JUMPS = tuple(InferenceSettings().jump_weights)
 _CLASS_SETTINGS = ("count", "max_count")
 
@@ -105,8 +107,10 @@ class _PendingClass(_Owner):
     position: tuple[str, str] | None = None
     footprint: Callable[[Values], np.ndarray] | None = None
     floating: bool = False
-    # Declared change correspondences: id(other class) -> (other, {parameter here: there}).
+    # Declared change correspondences: id(other class) -> (other, {parameter here: there}),
+    # and the factor of each that is scaled (here = factor * there).
     pairs: dict[int, tuple[_PendingClass, dict[str, str]]] = field(default_factory=dict)
+    scales: dict[int, dict[str, float]] = field(default_factory=dict)
     # Where each paired parameter was paired, for repeated pairings.
     paired_at: dict[tuple[int, str], Span] = field(default_factory=dict)
 
@@ -115,6 +119,11 @@ class _PendingClass(_Owner):
 class _PendingSensor(_Owner):
     likelihood: str | None = None
     options: dict[str, float] = field(default_factory=dict)
+
+
+def _scale_free(domain) -> bool:
+    """Domains that a positive factor maps onto themselves."""
+    return isinstance(domain, (Real, Positive))
 
 
 # ---- the compiler -------------------------------------------------------------------------
@@ -217,6 +226,11 @@ class _Compiler(ImportsMixin, ShapesMixin):
             for other, pairs in c.pairs.values()
             if self.classes.get(other.name) is other
         }
+        scales = {
+            other.name: dict(c.scales[key])
+            for key, (other, _) in c.pairs.items()
+            if key in c.scales and self.classes.get(other.name) is other
+        }
         rate = float(c.count) if c.count is not None else c.rate
         return ObjectClass(
             c.name,
@@ -229,6 +243,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
             max_count=c.max_count,
             floating=c.floating,
             correspondences=correspondences,
+            correspondence_scales=scales,
         )
 
     def _global_scope(self, where: str = "a model setting") -> Scope:
@@ -586,6 +601,20 @@ class _Compiler(ImportsMixin, ShapesMixin):
             pa, pb = _parameter(a, p.text), _parameter(b, q.text)
             if pa is None or pb is None:
                 continue  # it failed to compile, which was reported there
+            factor = 1.0 if node.factor is None else node.factor.value
+            if factor != 1.0 and not (factor > 0 and math.isfinite(factor)):
+                self.error(f"a change's factor must be positive, got {factor:g}",
+                           node.factor.span)
+                continue
+            if factor != 1.0 and not (pa.domain == pb.domain and _scale_free(pa.domain)):
+                self.error(
+                    f"`{a.name}.{p.text}` ({pa.domain.describe()}) and `{b.name}.{q.text}` "
+                    f"({pb.domain.describe()}) cannot be paired with a factor",
+                    node.factor.span,
+                    "a scaled value stays in its domain only for two real or two positive "
+                    "parameters",
+                )
+                continue
             if pa.domain != pb.domain:
                 self.error(
                     f"`{a.name}.{p.text}` ({pa.domain.describe()}) and `{b.name}.{q.text}` "
@@ -606,9 +635,11 @@ class _Compiler(ImportsMixin, ShapesMixin):
                     clash = True
             if clash:
                 continue
-            for owner, other, mine, theirs in ((a, b, p, q), (b, a, q, p)):
+            for owner, other, mine, theirs, k in ((a, b, p, q, factor), (b, a, q, p, 1 / factor)):
                 owner.paired_at[id(other), mine.text] = node.span
                 owner.pairs.setdefault(id(other), (other, {}))[1][mine.text] = theirs.text
+                if factor != 1.0:
+                    owner.scales.setdefault(id(other), {})[mine.text] = k
 
     def _change_side(self, cls: ast.Ident, name: ast.Ident):
         pending = self.classes.get(cls.text)
@@ -802,7 +833,18 @@ class _Compiler(ImportsMixin, ShapesMixin):
                     self.error(
                         f"`data_birth_spread` must be positive, got {value:g}", item.value.span
                     )
+                elif key in ("adapt", "anneal") and not (value >= 0 and value == int(value)):
+                    self.error(f"`{key}` is a number of sweeps, got {value:g}", item.value.span,
+                               "0 switches it off")
+                elif key == "tries" and not (value >= 1 and value == int(value)):
+                    self.error(f"`tries` is a number of candidates, at least 1, got {value:g}",
+                               item.value.span)
+                elif key == "anneal_from" and not 0.0 < value <= 1.0:
+                    self.error(f"`anneal_from` is a power of the likelihood in (0, 1], got "
+                               f"{value:g}", item.value.span)
                 else:
+                    if key in ("adapt", "anneal", "tries"):
+                        value = int(value)
                     self.inference[key] = value
 
     def _jump_weight_settings(self, node: ast.JumpWeights, scope: Scope) -> None:

@@ -180,8 +180,9 @@ class _Printer:
         elif isinstance(node, ast.Ground):
             self._add(_join("ground", _modifiers(node.modifiers)), 0, node.span)
         elif isinstance(node, ast.Change):
+            factor = "" if node.factor is None else f"{_number(node.factor)} * "
             text = (
-                f"change {node.first_class.text}.{node.first.text} <-> "
+                f"change {node.first_class.text}.{node.first.text} <-> {factor}"
                 f"{node.second_class.text}.{node.second.text}"
             )
             self._add(text, 0, node.span)
