@@ -61,7 +61,8 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--scene", type=Path, help="a scene file to render instead of a prior draw")
     s.add_argument("--depth-format", choices=("npy", "png"), default="npy",
                    help="depth files: float32 metres (npy) or uint16 millimetres (png)")
-    s.add_argument("--force", action="store_true", help="replace --out if it exists")
+    s.add_argument("--force", action="store_true",
+                   help="replace --out if it is an observation folder `sppl simulate` wrote")
 
     r = sub.add_parser("sample", help="draw posterior samples of the scene given observations")
     r.add_argument("model", type=Path, nargs="?",
@@ -77,7 +78,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--thin", type=int, default=None, help="keep every n-th sweep (default: 1)")
     r.add_argument("--burn", type=int, default=None,
                    help="sweeps left out of the posterior summary (default: half)")
-    r.add_argument("--force", action="store_true", help="replace --out if it exists")
+    r.add_argument("--force", action="store_true",
+                   help="replace --out if it is a run folder `sppl sample` wrote")
     r.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
     r.add_argument("--chains", type=int, default=None,
                    help="independent chains, run in parallel processes, each into "
@@ -138,14 +140,87 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _prepare_out(out: Path, force: bool) -> None:
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+# What each command writes in its --out folder: --force deletes a folder only if it holds
+# these and nothing else, and at least one of the markers (so an empty-looking folder of
+# someone else's is not taken for one of ours).
+OUT_KINDS = {
+    "run": {
+        "what": "a run folder", "writer": "`sppl sample`",
+        "markers": {"run.json", "samples.jsonl", "summary.json", "checkpoint.json"},
+        "files": {"run.json", "samples.jsonl", "summary.json", "summary.txt", "checkpoint.json",
+                  "checkpoint.json.tmp", "posterior.nc", ".sppl-write-test"},
+        "folders": {"report"},  # and chain_<i>/, each a run folder of one chain
+        "chains": True,
+    },
+    "obs": {
+        "what": "an observation folder", "writer": "`sppl simulate`",
+        "markers": {"transforms.json"},
+        "files": {"transforms.json", "scene.json", ".sppl-write-test"},
+        "folders": {"images", "depth"},
+        "chains": False,
+    },
+}
+
+
+def _is_chain_folder(name: str) -> bool:
+    return name.startswith("chain_") and name[len("chain_"):].isdigit()
+
+
+def _not_ours(folder: Path, kind: str, prefix: str = "") -> str | None:
+    """Why ``folder`` does not look like a ``kind`` output folder of sppl's, or None."""
+    spec = OUT_KINDS[kind]
+    names = []
+    for entry in sorted(folder.iterdir()):
+        name = prefix + entry.name
+        names.append(entry.name)
+        if entry.is_symlink():
+            return f"it holds {name}, a symbolic link"
+        if entry.is_dir() and spec["chains"] and not prefix and _is_chain_folder(entry.name):
+            inner = _not_ours(entry, kind, prefix=f"{entry.name}/")
+            if inner:
+                return inner
+        elif entry.name not in (spec["folders"] if entry.is_dir() else spec["files"]):
+            return f"it holds {name}, which {spec['writer']} does not write"
+    if not prefix and not set(names) & spec["markers"] and not any(map(_is_chain_folder, names)):
+        return f"it has none of {', '.join(sorted(spec['markers']))}"
+    return None
+
+
+def _within(path: Path, folder: Path) -> bool:
+    """Whether ``path`` is ``folder`` or inside it (both resolved)."""
+    return path == folder or folder in path.parents
+
+
+def _prepare_out(out: Path, force: bool, *, kind: str = "run",
+                 inputs: dict[str, Path | None] | None = None) -> None:
+    """Make ``out`` an empty folder that can be written. An existing non-empty ``out`` is
+    refused without ``force``; with it, it is deleted only if it looks like a ``kind``
+    output folder of sppl's (``OUT_KINDS``) and holds neither the current folder nor any of
+    the ``inputs`` (what the command reads, by the option that names it)."""
+    if out.is_symlink() or (out.exists() and (not out.is_dir() or any(out.iterdir()))):
         if not force:
             raise UsageError(f"{out} already exists; choose another --out or add --force to replace it")
-        if out.is_dir():
-            shutil.rmtree(out)
-        else:
-            out.unlink()
+        spec = OUT_KINDS[kind]
+        if out.is_symlink() or not out.is_dir():
+            this = "a symbolic link" if out.is_symlink() else "a file"
+            raise UsageError(f"{out}: --force replaces only {spec['what']} that {spec['writer']} "
+                             f"wrote, and this is {this}; remove it yourself or choose another "
+                             "--out")
+        folder, here = out.resolve(), Path.cwd().resolve()
+        if _within(here, folder):
+            where = ("the current folder" if folder == here
+                     else "a folder that holds the current one")
+            raise UsageError(f"{out}: --force would delete {where}; choose another --out")
+        for option, path in (inputs or {}).items():
+            if path is not None and _within(Path(path).resolve(), folder):
+                raise UsageError(f"{out}: --force would delete {path}, which {option} reads; "
+                                 "choose another --out")
+        why = _not_ours(out, kind)
+        if why:
+            raise UsageError(f"{out}: --force replaces only {spec['what']} that {spec['writer']} "
+                             f"wrote, and this does not look like one ({why}); remove it yourself "
+                             "or choose another --out")
+        shutil.rmtree(out)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -225,7 +300,9 @@ def cmd_simulate(args) -> int:
     else:
         objects = sample_objects(model, rng)
         noise = sample_noise(model, rng)
-    _prepare_out(args.out, args.force)
+    _prepare_out(args.out, args.force, kind="obs",
+                 inputs={"the model argument": args.model, "--cameras": args.cameras,
+                         "--scene": args.scene})
     frames = render_observations(model, objects, noise, cameras, Renderer(model.render), rng)
     write_observations(args.out, frames, depth_format=args.depth_format)
     scene = scene_dict(objects, noise)
@@ -258,7 +335,8 @@ def cmd_sample(args) -> int:
     model = load_model(args.model)
     obs = load_observations(args.obs)
     if args.resume is None:
-        _prepare_out(args.out, args.force)
+        _prepare_out(args.out, args.force, kind="run",
+                     inputs={"the model argument": args.model, "--obs": args.obs})
     result = run_chains(
         model, obs, args.out, chains=args.chains, steps=args.steps, seed=args.seed,
         thin=args.thin, burn=args.burn, progress=False if args.quiet else None,

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -105,9 +107,97 @@ def test_sample_streams_samples_and_summary(obs, root, tmp_path, capsys):
     # Same seed, same samples.
     assert main([*common, "--out", str(tmp_path / "again")]) == 0
     assert read_samples(tmp_path / "again" / "samples.jsonl") == samples
-    # An existing run is not overwritten without --force.
+    # An existing run is not overwritten without --force, and is replaced with it.
     assert main(args) == 1
-    assert "--force" in capsys.readouterr().err
+    assert "already exists" in capsys.readouterr().err
+    assert read_samples(out / "samples.jsonl") == samples
+    assert main([*args, "--steps", "5", "--force"]) == 0
+    assert [s["step"] for s in read_samples(out / "samples.jsonl")] == [1, 2, 3, 4, 5]
+    assert json.loads((out / "summary.json").read_text())["steps_done"] == 5
+
+
+def test_simulate_replaces_its_observations_only_with_force(obs, root, tmp_path, capsys):
+    again = tmp_path / "obs"
+    shutil.copytree(obs, again)
+    (again / "images" / "stale.png").write_bytes(b"")  # inside images/: sppl's to replace
+    args = ["simulate", str(root / "models" / "shapes.scn"), "--cameras",
+            str(obs.parent / "cameras.json"), "--out", str(again), "--seed", "3"]
+    assert main(args) == 1
+    assert "already exists" in capsys.readouterr().err
+    assert main([*args, "--force"]) == 0
+    assert not (again / "images" / "stale.png").exists()
+    assert sorted(p.name for p in again.iterdir()) == sorted(p.name for p in obs.iterdir())
+
+
+def old_run(out):
+    """A run folder of two chains as `sppl sample` and `sppl report` leave it."""
+    for folder in (out, out / "chain_0", out / "chain_1"):
+        folder.mkdir(parents=True)
+        for name in ("run.json", "summary.json", "summary.txt"):
+            (folder / name).write_text("{}")
+    for chain in ("chain_0", "chain_1"):
+        for name in ("samples.jsonl", "checkpoint.json", "checkpoint.json.tmp"):
+            (out / chain / name).write_text("")
+    (out / "posterior.nc").write_bytes(b"")
+    (out / "report").mkdir()
+    (out / "report" / "index.html").write_text("")
+    return out
+
+
+def test_force_replaces_a_whole_run_folder(tmp_path, monkeypatch):
+    from sppl.cli import _prepare_out
+    from sppl.errors import UsageError
+
+    monkeypatch.chdir(tmp_path)
+    out = old_run(tmp_path / "run")
+    with pytest.raises(UsageError, match="already exists"):
+        _prepare_out(out, False)
+    assert (out / "chain_1" / "samples.jsonl").exists()
+    _prepare_out(out, True, inputs={"--obs": tmp_path / "obs"})
+    assert out.is_dir() and list(out.iterdir()) == []
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda out: (out / "chain_1" / "mine.txt").write_text("x"), "chain_1/mine.txt"),
+    (lambda out: (out / "notes").mkdir(), "it holds notes, which `sppl sample` does not write"),
+    (lambda out: (out / "chain_0" / "old").symlink_to(out.parent),
+     "chain_0/old, a symbolic link"),
+    (lambda out: [shutil.rmtree(p) if p.is_dir() else p.unlink() for p in out.iterdir()
+                  if p.name != "report"], "it has none of"),
+], ids=["a-file-of-a-chain", "a-folder", "a-link", "no-run-files"])
+def test_force_keeps_a_run_folder_holding_what_sppl_did_not_write(tmp_path, monkeypatch, change,
+                                                                 message):
+    from sppl.cli import _prepare_out
+    from sppl.errors import UsageError
+
+    monkeypatch.chdir(tmp_path)
+    out = old_run(tmp_path / "run")
+    change(out)
+    before = sorted(str(p) for p in out.rglob("*"))
+    with pytest.raises(UsageError, match="does not look like one") as error:
+        _prepare_out(out, True)
+    assert message in str(error.value)
+    assert sorted(str(p) for p in out.rglob("*")) == before  # nothing deleted
+
+
+def test_force_never_deletes_the_folder_it_runs_in_or_its_inputs(tmp_path, monkeypatch):
+    from sppl.cli import _prepare_out
+    from sppl.errors import UsageError
+
+    out = old_run(tmp_path / "run")
+    monkeypatch.chdir(out / "chain_0")
+    with pytest.raises(UsageError, match="a folder that holds the current one"):
+        _prepare_out(out, True)
+    monkeypatch.chdir(tmp_path)
+    (out / "obs").mkdir()
+    with pytest.raises(UsageError, match="which --obs reads"):
+        _prepare_out(out, True, inputs={"--obs": Path("run") / "obs"})
+    sim = tmp_path / "sim"
+    sim.mkdir()
+    (sim / "transforms.json").write_text("{}")
+    with pytest.raises(UsageError, match="which --cameras reads"):
+        _prepare_out(sim, True, kind="obs", inputs={"--cameras": sim / "transforms.json"})
+    assert (out / "chain_0" / "samples.jsonl").exists() and (sim / "transforms.json").exists()
 
 
 def test_ctrl_c_leaves_readable_samples_and_summary(obs, root, tmp_path):
