@@ -274,13 +274,39 @@ def _chain_worker(source, path, observations, out, steps, seed, thin, burn, inde
                   progress=False, extra=extra, callback=tick, resume=resume,
                   checkpoint_seconds=checkpoint_seconds)
     except SpplError as e:
-        errors.put((index, str(e)))
+        errors.put((index, str(e), _traceback(), True))
         raise SystemExit(1) from None
-    except BaseException:
-        import traceback
+    except BaseException as e:  # noqa: BLE001 - reported by the parent as one line
+        errors.put((index, _one_line(e), _traceback(), False))
+        raise SystemExit(1) from None
 
-        errors.put((index, traceback.format_exc()))
-        raise SystemExit(1) from None
+
+def _traceback() -> str:
+    import traceback
+
+    return traceback.format_exc()
+
+
+def _one_line(e: BaseException) -> str:
+    """An exception that is not sppl's, as one line: the file and the system's reason for an
+    OSError, else the exception's type and the first line of its message."""
+    if isinstance(e, OSError) and e.strerror:
+        where = f"{e.filename}: " if e.filename is not None else ""
+        return f"{where}{e.strerror}"
+    text = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {text[0]}" if text else type(e).__name__
+
+
+class ChainTraceback(Exception):
+    """A chain worker's traceback, as the cause of the error the parent raises: shown with
+    ``--debug``, left out of the one-line message otherwise."""
+
+    def __init__(self, text: str) -> None:
+        super().__init__(text)
+        self.text = text
+
+    def __str__(self) -> str:
+        return f"\n\nthe chain's own traceback:\n{self.text.rstrip()}"
 
 
 def run_chains(
@@ -347,6 +373,7 @@ def run_chains(
 
     previous = signal.signal(signal.SIGTERM, on_term)
     interrupted = False
+    stopped: set[int] = set()  # the chains this process stopped because another one failed
     t0 = time.monotonic()
     bar = tqdm(total=steps * chains, disable=None if progress is None else not progress,
                unit="step", dynamic_ncols=True, leave=False)
@@ -356,6 +383,12 @@ def run_chains(
         while any(p.is_alive() for p in procs):
             time.sleep(0.25)
             bar.update(sum(done[:]) - bar.n)
+            if any(p.exitcode not in (0, None) for p in procs):  # a chain failed: stop the rest
+                for i, p in enumerate(procs):
+                    if p.is_alive():
+                        stopped.add(i)
+                        p.terminate()
+                break
     except (KeyboardInterrupt, Stop):
         interrupted = True
         for p in procs:
@@ -374,9 +407,17 @@ def run_chains(
             failures.append(errors.get(timeout=0.1))
         except Exception:
             break
+    reported = {f[0] for f in failures}
+    for i, p in enumerate(procs):  # a chain that died without a word (a signal, a crash)
+        if p.exitcode not in (0, None) and i not in reported | stopped and not interrupted:
+            how = (f"was killed by signal {-p.exitcode}" if p.exitcode < 0
+                   else f"exited with status {p.exitcode}")
+            failures.append((i, f"its process {how} before it could report why", "", True))
     if failures and not interrupted:
-        index, message = sorted(failures)[0]
-        raise SpplError(f"chain {index} failed: {message.strip()}")
+        index, message, trace, ours = sorted(failures)[0]
+        hint = None if ours else "`sppl --debug sample ...` shows where it failed"
+        error = SpplError(f"chain {index} failed: {message.strip()}", hint=hint)
+        raise error from (ChainTraceback(trace) if trace else None)
     summary = combine_chains(out, seconds=seconds, interrupted=interrupted)
     return RunResult(summary, None, None)
 

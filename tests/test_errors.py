@@ -30,6 +30,7 @@ BEGIN, END = "<!-- cases: begin -->", "<!-- cases: end -->"
 W, H = 8, 6
 MODEL = (ROOT / "models" / "shapes.scn").read_text(encoding="utf-8")
 SAMPLE = ["sample", "model.scn", "--obs", "obs", "--out", "run", "-q"]
+FORCE = ["--steps", "5", "--force"]  # few steps: a --force that wrongly goes ahead ends soon
 
 
 def _pose(eye=(3.0, -2.0, 1.5), target=(0.0, 0.0, 0.5)):
@@ -120,6 +121,29 @@ class Case:
     expect: str  # a part of the message it must get
     env: dict[str, str] = field(default_factory=dict)  # run as a separate process if given
     excerpt: bool = False  # a model error: the offending line and a caret follow the message
+    unless: Callable[[], str | None] | None = None  # why the case can't be made here, if so
+
+
+def a_two_chain_run(d: Path) -> None:
+    """A run of two chains, stopped before either wrote anything, whose chain_1 folder has
+    been replaced by a file: the second chain's worker process cannot write its samples."""
+    a_run(steps=4, done=0, chains=2, chain_folders=["chain_0", "chain_1"])(d)
+    (d / "run" / "checkpoint.json").unlink()
+    (d / "run" / "chain_1").write_text("not a folder")
+
+
+UNWRITABLE = "/sys/sppl-run"  # sysfs refuses mkdir even to root (chmod does not stop root)
+
+
+def unwritable_is_unwritable() -> str | None:
+    try:
+        os.mkdir(UNWRITABLE)
+    except PermissionError:
+        return None
+    except OSError as e:
+        return f"mkdir {UNWRITABLE} fails here with {e.strerror}, not a permission error"
+    os.rmdir(UNWRITABLE)
+    return f"{UNWRITABLE} can be created on this machine"
 
 
 def shear() -> list:
@@ -239,6 +263,8 @@ CASES = [
          "every pixel of the depth map is missing"),
     Case("depth-size", "depth map of another size than the image", SAMPLE,
          with_files(depth=np.full((H + 2, W), 2.0, np.float32)), "depth map is 8x8"),
+    Case("depth-missing", "depth file named in transforms.json missing", SAMPLE,
+         with_frame(depth_file_path="depth/b.npy"), "'depth/b.npy' not found"),
     # -- environment and options --------------------------------------------------------------
     Case("no-egl", "no EGL library (libEGL.so.1 missing)", SAMPLE, good, "apt-get install",
          env={"GLCONTEXT_LINUX_LIBEGL": "/nonexistent/libEGL.so.1"}),
@@ -249,6 +275,30 @@ CASES = [
     Case("out-unwritable", "--out that cannot be written (under a file)",
          [*SAMPLE[:-3], "--out", "notes.txt/run", "-q"], then(good, write("notes.txt", "x")),
          "cannot create the output folder"),
+    Case("out-permission", "--out where creating a folder is not permitted",
+         [*SAMPLE[:-3], "--out", UNWRITABLE, "-q"], good,
+         "cannot create the output folder (Operation not permitted)",
+         unless=unwritable_is_unwritable),
+    Case("force-not-a-run", "--force on a folder that is not a run folder",
+         [*SAMPLE, *FORCE], then(good, write("run/notes.txt", "mine")),
+         "it holds notes.txt, which `sppl sample` does not write"),
+    Case("force-a-file", "--force on a file",
+         [*SAMPLE[:-3], "--out", "notes.txt", "-q", *FORCE],
+         then(good, write("notes.txt", "mine")), "this is a file"),
+    Case("force-the-observations", "--force on the observation folder",
+         [*SAMPLE[:-3], "--out", "obs", "-q", *FORCE], good,
+         "would delete obs, which --obs reads"),
+    Case("force-holds-the-model", "--force on a folder holding the model file",
+         ["sample", "in/model.scn", "--obs", "obs", "--out", "in", "-q", *FORCE],
+         then(good, lambda d: os.renames(d / "model.scn", d / "in" / "model.scn")),
+         "would delete in/model.scn, which the model argument reads"),
+    Case("force-current-folder", "--force on the current folder",
+         [*SAMPLE[:-3], "--out", ".", "-q", *FORCE], good,
+         "would delete the current folder"),
+    Case("force-run-as-obs", "simulate --force over a run folder",
+         ["simulate", "model.scn", "--cameras", "obs/transforms.json", "--out", "run",
+          "--force"],
+         a_run(), "replaces only an observation folder"),
     Case("steps-zero", "--steps 0", [*SAMPLE, "--steps", "0"], good, "at least 1"),
     Case("resume-not-run", "--resume of a folder that is not a run", ["sample", "--resume", "obs"],
          good, "not a run folder"),
@@ -259,6 +309,12 @@ CASES = [
          a_run(done=5, model_sha256="0" * 64), "model has changed"),
     Case("resume-seed", "--resume with another --seed",
          ["sample", "--resume", "run", "--seed", "3"], a_run(done=5), "--seed 3 differs"),
+    # -- several chains: errors found before the chains start, and in a chain's own process --
+    Case("chains-bad-obs", "a bad observation with --chains 2", [*SAMPLE, "--chains", "2"],
+         with_files(depth=np.zeros((H, W), np.float32)),
+         "every pixel of the depth map is missing"),
+    Case("chains-worker-fails", "a chain's process fails (its folder is a file)",
+         ["sample", "--resume", "run", "-q"], a_two_chain_run, "chain 1 failed: run/chain_1"),
 ]
 
 
@@ -295,6 +351,8 @@ def test_the_case_names_are_unique():
 
 @pytest.mark.parametrize("case", CASES, ids=lambda c: c.name)
 def test_bad_input_gets_one_clear_message(case, results):
+    if case.unless and case.unless():
+        pytest.skip(case.unless())
     code, err = results[case.name]
     assert code == 1, err
     assert "Traceback" not in err
@@ -305,6 +363,37 @@ def test_bad_input_gets_one_clear_message(case, results):
         assert ":" in lines[0].split()[1] and lines[-1].strip().endswith("^"), err
     else:
         assert len(lines) == 1, err
+
+
+def run_command(case: Case, folder: Path, *before: str) -> subprocess.CompletedProcess:
+    """The case's command as a user runs it, ``python -m sppl [before...] ARGS``, in ``folder``."""
+    folder.mkdir(parents=True)
+    case.setup(folder)
+    env = {**os.environ, **case.env, "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, "-m", "sppl", *before, *case.args], cwd=folder,
+                          env=env, capture_output=True, text=True, timeout=300, check=False)
+
+
+@pytest.mark.parametrize("name, raised, where", [
+    ("obs-missing", "sppl.errors.ObservationError", "load_observations"),
+    # The failure is in a chain's own process: its traceback comes with the parent's.
+    ("chains-worker-fails", "sppl.errors.SpplError", "the chain's own traceback"),
+])
+def test_debug_shows_the_traceback_that_is_otherwise_left_out(tmp_path, name, raised, where):
+    case = next(c for c in CASES if c.name == name)
+    plain = run_command(case, tmp_path / "plain")
+    assert plain.returncode == 1
+    assert "Traceback" not in plain.stderr and len(plain.stderr.strip().splitlines()) == 1
+    message = plain.stderr.strip().removeprefix("error: ")
+    assert case.expect in message
+
+    debug = run_command(case, tmp_path / "debug", "--debug")
+    assert debug.returncode == 1, debug.stderr
+    assert "Traceback (most recent call last):" in debug.stderr, debug.stderr
+    assert where in debug.stderr
+    assert debug.stderr.rstrip().endswith(f"{raised}: {message}"), debug.stderr
+    if name == "chains-worker-fails":  # where in the chain it failed, not only that it did
+        assert "FileExistsError" in debug.stderr and "in run_chain" in debug.stderr
 
 
 def table(results: dict[str, tuple[int, str]]) -> str:
@@ -328,6 +417,9 @@ def doc_table() -> str:
 
 
 def test_the_table_in_docs_errors_md_is_these_cases(results):
+    cannot = [f"{c.name}: {c.unless()}" for c in CASES if c.unless and c.unless()]
+    if cannot:
+        pytest.skip("the table has cases this machine cannot make: " + "; ".join(cannot))
     assert doc_table() == table(results), "run `python tests/test_errors.py` and review the diff"
 
 
