@@ -3,7 +3,9 @@ order, in a fresh folder beside the repository's models/.
 
 A block ```LANG file=PATH``` is a file to save; a ```console``` block holds commands, one a
 line after "$ ". The install command is the one exception: it is not run here, but it must be
-the command the CI script runs (so CI runs it).
+the command the CI script runs (so CI runs it). A command the prose tells the reader to run, in
+an inline code span, must be one of the blocks' commands too (or, for the system packages, the
+ones the CI script installs).
 """
 
 from __future__ import annotations
@@ -19,6 +21,9 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 FENCE = re.compile(r"^```([^\n]*)\n(.*?)^```\s*$", re.MULTILINE | re.DOTALL)
 INSTALL = "python3 -m pip install -e '.[test]'"
+# A command to run, in an inline code span: a program and an argument (for sppl, a command
+# and an argument: `sppl sample` alone names the command).
+INLINE_COMMAND = re.compile(r"`((?:sppl +\S+|python3?|pip|sudo|apt-get) +[^`\s][^`]*)`")
 
 
 def tutorial_steps(text: str) -> list[tuple[str, str, str]]:
@@ -42,6 +47,29 @@ def test_the_tutorial_installs_the_way_ci_does():
     assert installs == [INSTALL]
     assert INSTALL in (ROOT / ".ci" / "run").read_text().replace(" -q ", " ")  # quiet or not
     assert INSTALL in (ROOT / "README.md").read_text()
+
+
+def inline_commands(text: str) -> list[str]:
+    """Commands in the prose (outside the fenced blocks), in inline code spans."""
+    return INLINE_COMMAND.findall(FENCE.sub("", text))
+
+
+def test_every_command_the_prose_gives_is_run():
+    text = (ROOT / "docs" / "tutorial.md").read_text()
+    run = {c for kind, c, _ in tutorial_steps(text) if kind == "run"}
+    ci = (ROOT / ".ci" / "run").read_text()
+    for command in inline_commands(text):
+        if command.startswith("sudo apt-get install "):  # the system packages: CI installs them
+            packages = command.split()[3:]
+            assert all(re.search(rf"\b{re.escape(p)}\b", ci) for p in packages), command
+        else:
+            assert command in run, f"`{command}` is in the prose but in no console block"
+
+
+def test_inline_commands_are_found_outside_blocks_only():
+    page = ("Run `sppl verify m.scn` and then `sppl export RUN --out FILE`; `sppl sample` alone "
+            "names a command.\n\n```console\n$ sppl check `m.scn`\n```\n")
+    assert inline_commands(page) == ["sppl verify m.scn", "sppl export RUN --out FILE"]
 
 
 def run_steps(steps, folder: Path) -> None:
@@ -99,3 +127,4 @@ def test_every_command_of_the_tutorial_runs(tmp_path, require_gl):
     for f in ("chain_0/samples.jsonl", "chain_1/samples.jsonl", "summary.json", "posterior.nc",
               "report/index.html", "report/occupancy.png"):
         assert (run / f).exists(), f
+    assert (tmp_path / "tutorial" / "posterior.nc").stat().st_size > 0  # sppl export's
