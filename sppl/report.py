@@ -374,6 +374,17 @@ def marginal_figures(model, map_objects, samples, truth, folder: Path) -> list[F
 
 
 def trace_figure(run: RunFiles, folder: Path) -> Figure:
+    return Figure(
+        _save(trace_plot(run), folder, "traces.png"), "Traces",
+        "Each stored sweep of each chain (one colour a chain). The dotted line is the end of "
+        "burn-in: only samples after it enter the posterior summaries. Chains that have "
+        "converged wander over the same range; one stuck elsewhere shows as a separate band.",
+    )
+
+
+def trace_plot(run: RunFiles):
+    """The trace figure: one row each for the log joint, the number of objects and each
+    noise scale, one line a chain in that chain's colour (``CHAIN_COLOURS``)."""
     noise_names = [(kind, name) for kind, ps in run.chains[0].samples[0]["noise"].items()
                    for name in ps] if run.chains[0].samples else []
     rows = ["log joint", "number of objects", *[f"{k}.{n}" for k, n in noise_names]]
@@ -405,12 +416,7 @@ def trace_figure(run: RunFiles, folder: Path) -> Figure:
     axes[-1].set_xlabel("sweep")
     if len(run.chains) > 1:
         axes[1].legend(fontsize=7, ncol=min(len(run.chains), 6), frameon=False, loc="upper right")
-    return Figure(
-        _save(fig, folder, "traces.png"), "Traces",
-        "Each stored sweep of each chain (one colour a chain). The dotted line is the end of "
-        "burn-in: only samples after it enter the posterior summaries. Chains that have "
-        "converged wander over the same range; one stuck elsewhere shows as a separate band.",
-    )
+    return fig
 
 
 def acceptance_figure(summary: dict[str, Any], folder: Path) -> Figure:
