@@ -1,9 +1,15 @@
 """The example scripts of examples/ run and write their figures: quickly by default, in full
-(regenerating what docs/ shows and checking what the docs claim) with -m slow."""
+(regenerating what docs/ shows and checking what the docs claim) with -m slow.
+
+What each doc claims is a function of the script's printed output (``occlusion_claims``,
+``single_object_claims``, the fusion verdict): the slow runs check it on a fresh run, and a
+quick test checks it on the output the docs quote, so the claims and the docs cannot drift.
+"""
 
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -70,6 +76,105 @@ def test_example_regenerates_its_figures(script, tmp_path, require_gl):
                    if line.startswith(("RGB camera alone", "depth camera alone", "both (fusion)"))}
         assert verdict == {"RGB camera alone": "no", "depth camera alone": "no",
                            "both (fusion)": "yes"}, out
+    elif script.startswith("occlusion"):
+        assert occlusion_claims(out) == [], out
+    else:
+        assert single_object_claims(out) == [], out
+
+
+# -- what docs/occlusion.md and docs/single_object.md claim, from the scripts' output ----------
+
+SHADOW_ROW = re.compile(r"^(prior|posterior|MAP scene) +([\d.]+) +([\d.]+) +([\d.]+)", re.M)
+
+
+def occlusion_claims(out: str) -> list[str]:
+    """What docs/occlusion.md claims of the table the script prints, as the claims that fail:
+    the posterior puts more mass than the prior on an object in the cube's shadow and on a
+    green cone there, and most of its mass (every sample, in the documented run, against a
+    fifth of the prior's draws) on an object there, a green cone in most samples."""
+    rows = {m[0]: [float(v) for v in m[1:]] for m in SHADOW_ROW.findall(out)}
+    if not {"prior", "posterior"} <= set(rows):
+        return ["no prior and posterior rows in the output"]
+    (prior_any, _, prior_green), (post_any, _, post_green) = rows["prior"], rows["posterior"]
+    failures = []
+    if not post_any > prior_any:
+        failures.append(f"P(object in the shadow): posterior {post_any} not above prior "
+                        f"{prior_any}")
+    if not post_green > prior_green:
+        failures.append(f"P(a green cone there): posterior {post_green} not above prior "
+                        f"{prior_green}")
+    if not post_any > 0.5 or not post_green > 0.5:
+        failures.append(f"the posterior does not put most of its mass on the hidden object "
+                        f"(P(object) {post_any}, P(green cone) {post_green})")
+    return failures
+
+
+MODE_ROW = re.compile(r"^ *(\d+) +([\d.]+) +([\d.]+)% +([\d.]+) ± [\d.]+ +[\d.]+ +([\d.]+) ± "
+                      r"[\d.]+ +([+-](?:[\d.]+|nan))$", re.M)
+ELSEWHERE_ROW = re.compile(r"^ *(\d+) +([\d.]+) +[\d.]+% +elsewhere: ([\d.]+) m away, side "
+                           r"([\d.]+) m$", re.M)
+ALMOST_AS_WELL = 100.0  # nats: a chain elsewhere whose MAP is this close explains the image too
+
+
+def single_object_claims(out: str) -> list[str]:
+    """What docs/single_object.md claims of the script's output, as the claims that fail: the
+    MAP recovers the one cube; in the posterior's main mode the cube's side grows with its
+    distance along the camera's ray (positive correlation, in every chain that spends most of
+    its samples there); and a chain that stopped elsewhere on the ray with a MAP that explains
+    the image almost as well (within ``ALMOST_AS_WELL`` nats of the best) holds a cube both
+    farther and bigger than the main mode's: the same coupling at a larger scale."""
+    failures = []
+    recovered = re.search(r"^recovered (\d+)/(\d+)", out, re.M)
+    if not recovered or recovered[1] != recovered[2]:
+        failures.append(f"the MAP does not recover the cube: {recovered and recovered[0]}")
+    main = [(int(i), float(lj), float(share), float(d), float(side), float(corr))
+            for i, lj, share, d, side, corr in MODE_ROW.findall(out)]
+    elsewhere = [(int(i), float(lj), float(d), float(side))
+                 for i, lj, d, side in ELSEWHERE_ROW.findall(out)]
+    mostly = [row for row in main if row[2] > 50.0]
+    if not mostly:
+        failures.append("no chain spends most of its samples in the main mode")
+        return failures
+    for i, _, _, _, _, corr in mostly:
+        if not corr > 0:
+            failures.append(f"chain {i}: side and distance not positively correlated ({corr})")
+    best = max(row[1] for row in main + elsewhere)
+    d_main = sum(r[3] for r in mostly) / len(mostly)
+    side_main = sum(r[4] for r in mostly) / len(mostly)
+    for i, lj, d, side in elsewhere:
+        if lj > best - ALMOST_AS_WELL and not (d > d_main and side > side_main):
+            failures.append(f"chain {i} stopped elsewhere at {d} m, side {side} m: not "
+                            f"farther and bigger than the main mode ({d_main:.3f} m, "
+                            f"{side_main:.3f} m)")
+    return failures
+
+
+def quoted_output(doc: str) -> str:
+    """The output blocks a doc quotes from its script's run (```-fenced, no language)."""
+    text = (ROOT / "docs" / doc).read_text(encoding="utf-8")
+    return "\n".join(re.findall(r"^```\n(.*?)^```$", text, re.M | re.S))
+
+
+def test_the_claims_hold_for_the_output_the_docs_quote():
+    occlusion, single = quoted_output("occlusion.md"), quoted_output("single_object.md")
+    assert len(SHADOW_ROW.findall(occlusion)) == 3 and occlusion_claims(occlusion) == []
+    assert len(MODE_ROW.findall(single)) == 3 and len(ELSEWHERE_ROW.findall(single)) == 1
+    assert single_object_claims(single) == []
+
+
+def test_the_claims_fail_on_output_that_contradicts_the_docs():
+    occlusion = quoted_output("occlusion.md")
+    ignored = re.sub(r"^posterior( +)[\d.]+ +[\d.]+ +[\d.]+", r"posterior\g<1>0.100 0.010 0.001",
+                     occlusion, flags=re.M)
+    assert len(occlusion_claims(ignored)) == 3
+    assert occlusion_claims("nothing printed") == ["no prior and posterior rows in the output"]
+    single = quoted_output("single_object.md")
+    assert len(single_object_claims(single.replace("+0.56", "-0.56"))) == 1
+    assert len(single_object_claims(single.replace("recovered 1/1", "recovered 0/1"))) == 1
+    nearer = single.replace("elsewhere: 4.407 m away", "elsewhere: 3.100 m away")
+    assert "not farther and bigger" in single_object_claims(nearer)[0]
+    far_below = nearer.replace("4781.3", "4700.0")  # a MAP far worse: not "almost as well"
+    assert single_object_claims(far_below) == []
 
 
 @pytest.mark.slow
