@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import moves, tries
+from . import fit, moves, tries
 from .birth import BirthProposal
 from .model import Model
 from .trace import Trace, noise_log_prior, objects_log_prior, overlaps_any
@@ -220,20 +220,23 @@ class Sampler:
 
     def propose_jump(self, trace: Trace) -> moves.Proposal | None:
         u = self.rng.random()
+        if u >= 1.0 - self.jump["refit"]:
+            return fit.propose_refit(self, trace, self.rng)
+        u_replace = 1.0 - self.jump["replace"] - self.jump["refit"]
         m = self.model.inference.tries
         if m > 1:  # multiple-try births, deaths and replaces (sppl.tries)
             if u < self.jump["birth"]:
                 return tries.propose_birth(self, trace, self.rng, m)
             if u < self.jump["birth"] + self.jump["death"]:
                 return tries.propose_death(self, trace, self.rng, m)
-            if u >= 1.0 - self.jump["replace"]:
+            if u >= u_replace:
                 return tries.propose_replace(self, trace, self.rng, m)
             return moves.propose_change(self.model, trace, self.rng)
         if u < self.jump["birth"]:
             return moves.propose_birth(self.model, trace, self.rng, self.birth)
         if u < self.jump["birth"] + self.jump["death"]:
             return moves.propose_death(self.model, trace, self.rng, self.birth)
-        if u < 1.0 - self.jump["replace"]:
+        if u < u_replace:
             return moves.propose_change(self.model, trace, self.rng)
         return moves.propose_replace(
             self.model, trace, self.rng, self.birth, lambda objs: self.make_trace(objs, trace.noise)

@@ -25,7 +25,7 @@ from .birth import BirthProposal
 from .model import Model, ObjectClass
 from .trace import SceneObject, Trace, make_object
 
-JUMPS = ("birth", "death", "change", "replace")
+JUMPS = ("birth", "death", "change", "replace", "refit")
 
 
 @dataclass(frozen=True, eq=False)

@@ -43,6 +43,9 @@ class Tries:
     others: tuple[SceneObject, ...]
     references: tuple[SceneObject, ...] = ()
 
+    def reverse(self, sampler, before: Trace, proposal: Proposal, after: Trace) -> Proposal:
+        return reverse(sampler, before, proposal, after)
+
 
 def _draw(sampler, state: Trace, n: int, rng: np.random.Generator) -> list[SceneObject]:
     """n candidates from the birth proposal of ``state``."""

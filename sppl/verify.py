@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from . import moves, tries
+from . import moves
 from .camera import Camera, focal_from_fov, look_at
 from .chain import Sampler
 from .domains import Finite, Integer
@@ -803,8 +803,8 @@ def check_reverse(sampler: Sampler, trace: Trace, proposal) -> tuple[float, floa
     if new is None:
         return None
     forward = sampler.log_alpha(trace, proposal, new)
-    if proposal.tries is not None:  # a multiple-try jump, undone with the same candidates
-        rev = tries.reverse(sampler, trace, proposal, new)
+    if proposal.tries is not None:  # a multiple-try jump or a refit, undone with the same draws
+        rev = proposal.tries.reverse(sampler, trace, proposal, new)
     else:
         rev = moves.reverse(sampler.model, trace, proposal, new, sampler.birth,
                             without=lambda objs: sampler.make_trace(objs, new.noise))

@@ -1,0 +1,186 @@
+"""The refit jump: replace an object by one of any class fitted to the pixels it explains.
+
+A sphere that the chain grew where a cube stands cannot become that cube by any one move that
+draws the cube's size and angle from the prior: the chance that a draw lands close enough to
+be accepted is around one in a million. The refit jump instead *fits* the new object to the
+observations first. It picks object k (uniform) and a class c (uniform), removes k, and runs
+a short deterministic search for the parameters of a c-object that maximise the posterior of
+the scene without k plus that object, starting from k's own values (by name) and its place.
+The proposal is then
+
+    y ~ q(y | x-, k) = N(continuous parameters; fitted, diag(tau^2))
+                       x P(categorical parameters | fitted: the fitted value w.p. 1 - EPS)
+                       x prior(integer parameters)
+
+which is a proper, computable density because the fit is a deterministic function of the
+scene without k (x-) and of k. The reverse picks the new object and k's class, fits a
+k-class object from the new object's values in the same x-, and must propose k exactly:
+
+    alpha_refit = pi(x- + y) q(old | x-, y) / (pi(x- + old) q(y | x-, old)).
+
+The object and class choices are uniform both ways and cancel. ``tau`` is half each
+parameter's random-walk step. Proposals outside a parameter's domain have zero prior and are
+rejected, so the Gaussian needs no truncation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .domains import Finite
+from .model import ObjectClass
+from .moves import Proposal
+from .trace import SceneObject, Trace, make_object
+
+# Chance that a categorical parameter is not the fitted value (then uniform among the rest).
+EPS = 0.2
+# The search: passes over the continuous parameters, first step (in random-walk steps), and
+# how often a step is halved when no move improves the fit.
+START_STEP = 4.0
+HALVINGS = 3
+MAX_EVALUATIONS = 40
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+@dataclass(frozen=True)
+class Refit:
+    """What a refit jump used: the scene without the object, for its reverse."""
+
+    state: Trace
+    place: int
+
+    def reverse(self, sampler, before: Trace, proposal: Proposal, after: Trace) -> Proposal:
+        old = before.objects[self.place]
+        return propose_refit(sampler, after, sampler.rng, k=self.place, cls=old.cls,
+                             target=old, state=self.state)
+
+
+def _start(cls: ObjectClass, like: SceneObject) -> dict[str, Any]:
+    """Where the search starts: the values of ``like`` that ``cls`` has (by name and domain),
+    the others from a fixed draw of the class's prior."""
+    values = cls.sample_prior(np.random.default_rng(0))
+    for p in cls.parameters:
+        q = like.cls.parameter(p.name)
+        if q is not None and q.domain == p.domain:
+            values[p.name] = like.values[p.name]
+    return values
+
+
+def _score(sampler, state: Trace, cls: ObjectClass, values) -> float:
+    obj = make_object(sampler.model, cls, values)
+    p = Proposal("birth", cls.name, state.objects + (obj,), state.noise, (obj,))
+    new = sampler.evaluate(state, p)
+    return -math.inf if new is None else new.score
+
+
+def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject) -> dict[str, Any]:
+    """The deterministic fit of a ``cls`` object into ``state``, from ``like``'s values: each
+    categorical parameter set to its best value, then a pattern search over the continuous
+    ones (a step each way per parameter, halved when nothing improves), then the categorical
+    ones again."""
+    values = _start(cls, like)
+    best = _score(sampler, state, cls, values)
+    evaluations = 1
+    cont = [p for p in cls.parameters if p.continuous]
+    finite = [p for p in cls.parameters if isinstance(p.domain, Finite)]
+
+    def categorical(values, best, evaluations):
+        for p in finite:
+            for v in p.domain.values:
+                if v == values[p.name]:
+                    continue
+                trial = {**values, p.name: v}
+                s = _score(sampler, state, cls, trial)
+                evaluations += 1
+                if s > best:
+                    values, best = trial, s
+        return values, best, evaluations
+
+    values, best, evaluations = categorical(values, best, evaluations)
+    steps = {p.name: START_STEP * p.proposal_scale for p in cont}
+    halvings = 0
+    while cont and halvings <= HALVINGS and evaluations < MAX_EVALUATIONS:
+        improved = False
+        for p in cont:
+            for sign in (1.0, -1.0):
+                trial = {**values, p.name: values[p.name] + sign * steps[p.name]}
+                s = _score(sampler, state, cls, trial)
+                evaluations += 1
+                if s > best:
+                    values, best, improved = trial, s, True
+                    break
+            if evaluations >= MAX_EVALUATIONS:
+                break
+        if not improved:
+            steps = {n: v / 2 for n, v in steps.items()}
+            halvings += 1
+    values, best, evaluations = categorical(values, best, evaluations)
+    return values
+
+
+def log_density(cls: ObjectClass, values, fitted) -> float:
+    """log q(values | fitted) of the refit proposal for a ``cls`` object."""
+    total = 0.0
+    for p in cls.parameters:
+        v = values[p.name]
+        if p.continuous:
+            tau = 0.5 * p.proposal_scale
+            total += -0.5 * ((v - fitted[p.name]) / tau) ** 2 - math.log(tau) - 0.5 * _LOG_2PI
+        elif isinstance(p.domain, Finite):
+            others = len(p.domain.values) - 1
+            if v == fitted[p.name]:
+                total += math.log(1.0 - EPS) if others else 0.0
+            else:
+                total += math.log(EPS / others)
+        else:
+            total += p.log_prob(v, values)
+    return total
+
+
+def _draw(cls: ObjectClass, fitted, rng: np.random.Generator) -> dict[str, Any]:
+    values = dict(fitted)
+    for p in cls.parameters:
+        if p.continuous:
+            values[p.name] = fitted[p.name] + 0.5 * p.proposal_scale * float(
+                rng.standard_normal())
+        elif isinstance(p.domain, Finite):
+            others = [v for v in p.domain.values if v != fitted[p.name]]
+            if others and rng.random() < EPS:
+                values[p.name] = others[int(rng.integers(len(others)))]
+        else:
+            values[p.name] = p.sample(rng, values)
+    return values
+
+
+def propose_refit(sampler, trace: Trace, rng: np.random.Generator, k: int | None = None,
+                  cls: ObjectClass | None = None, target: SceneObject | None = None,
+                  state: Trace | None = None) -> Proposal | None:
+    """A refit of object k (uniform) as a ``cls`` (uniform) object; given ``target``, the
+    proposal of exactly that object (the reverse of a refit, through the same ``state``)."""
+    n = len(trace.objects)
+    if n == 0:
+        return None
+    model = sampler.model
+    k = int(rng.integers(n)) if k is None else k
+    cls = model.classes[int(rng.integers(len(model.classes)))] if cls is None else cls
+    old = trace.objects[k]
+    rest = trace.objects[:k] + trace.objects[k + 1 :]
+    # The scene without k, rendered in full so that its scores, and so the fits, are the
+    # same whichever state it is reached from.
+    state = state if state is not None else sampler.make_trace(rest, trace.noise)
+    forward = fit(sampler, state, cls, old)
+    values = dict(target.values) if target is not None else _draw(cls, forward, rng)
+    obj = target if target is not None else make_object(model, cls, values)
+    objects = rest[:k] + (obj,) + rest[k:]
+    log_q_forward = log_density(cls, values, forward)
+    if not math.isfinite(obj.log_prior):
+        return Proposal("refit", old.cls.name, objects, trace.noise, (obj,), -math.inf,
+                        tries=Refit(state, k))
+    back = fit(sampler, state, old.cls, obj)
+    log_q_back = log_density(old.cls, old.values, back)
+    return Proposal("refit", old.cls.name, objects, trace.noise, (obj,),
+                    log_q_back - log_q_forward, tries=Refit(state, k))
