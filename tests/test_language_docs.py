@@ -1,4 +1,5 @@
-"""docs/language.md is true: each of its ```scn examples parses and compiles.
+"""docs/language.md is true: each of its ```scn examples parses and compiles, and its grammar is
+the one in sppl/lang/scn.lark.
 
 Every example is a complete model file. It is compiled as if it were a file in ``models/``,
 so that the mesh and import paths in it name the shipped files (``meshes/mug.obj``,
@@ -7,6 +8,7 @@ so that the mesh and import paths in it name the shipped files (``meshes/mug.obj
 
 from __future__ import annotations
 
+import importlib.util
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,7 +23,12 @@ DOC = ROOT / "docs" / "language.md"
 # Where the examples are compiled from: the folder of the shipped models.
 AS_IF_IN = ROOT / "models" / "language-md-example.scn"
 # What a fenced block of the page may be; a block without a language would escape the test.
-LANGUAGES = {"scn", "text", "toml", "sh"}
+LANGUAGES = {"scn", "lark", "text", "toml", "sh"}
+
+_spec = importlib.util.spec_from_file_location("update_grammar", ROOT / "docs/update_grammar.py")
+update_grammar = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(update_grammar)
+
 
 @dataclass(frozen=True)
 class Block:
@@ -96,3 +103,21 @@ def test_a_broken_example_is_reported_at_its_line_in_the_page():
                               "docs/language.md:41:21: unknown function `gama`"), failure
     failure = _failure(Block("scn", 40, good + "    ...\n"))
     assert "does not parse:\ndocs/language.md:44:5:" in failure, failure
+
+
+def test_the_grammar_in_the_page_is_scn_lark():
+    grammar = (ROOT / "sppl" / "lang" / "scn.lark").read_text(encoding="utf-8")
+    [block] = [b for b in BLOCKS if b.language == "lark"]
+    assert block.text == grammar, (
+        "the grammar in docs/language.md differs from sppl/lang/scn.lark; "
+        "run: python docs/update_grammar.py")
+    doc = DOC.read_text(encoding="utf-8")
+    assert update_grammar.with_grammar(doc, grammar) == doc
+
+
+def test_the_grammar_script_replaces_only_the_grammar():
+    doc = "# page\n\n```lark\nold: rule\n```\n\nafter\n"
+    assert update_grammar.with_grammar(doc, "new: rule\n") == (
+        "# page\n\n```lark\nnew: rule\n```\n\nafter\n")
+    with pytest.raises(ValueError):
+        update_grammar.with_grammar("no grammar here\n", "new: rule\n")
