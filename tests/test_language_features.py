@@ -193,6 +193,39 @@ def test_a_dependent_prior_that_breaks_is_reported_with_the_values():
         cls.log_prior({"r": 1.5, "h": 0.2})
 
 
+def test_dependent_weights_that_break_are_reported_with_the_values():
+    cls = model(
+        """
+        class thing {
+            count ~ poisson(1)
+            p : interval(0, 2) ~ uniform(0, 2)
+            m : categorical ~ categorical(wood: p, metal: 1 - p)
+            geometry box(1, 1, 1) colour rgb(1, 1, 1)
+        }
+        """
+    ).object_class("thing")
+    assert math.isfinite(cls.log_prior({"p": 0.5, "m": "wood"}))
+    with pytest.raises(ModelError, match=r"where p = 1.5: its weights must not be negative nor all"):
+        cls.log_prior({"p": 1.5, "m": "wood"})
+
+
+def test_geometry_that_cannot_be_evaluated_for_some_values_says_which():
+    cls = model(
+        """
+        class thing {
+            count ~ poisson(1)
+            x : real ~ normal(0, 1)
+            geometry sphere(sqrt(x)) colour rgb(1, 1, 1)
+        }
+        """
+    ).object_class("thing")
+    assert cls.parts({"x": 4.0})
+    with pytest.raises(ModelError, match=r"the geometry of class `thing` cannot be evaluated "
+                                         r"for \{'x': -1.0\}: ") as info:
+        cls.parts({"x": -1.0})
+    assert info.value.span.line == 5
+
+
 def test_order_inside_a_class_is_free_but_cycles_are_errors():
     m = model(
         """

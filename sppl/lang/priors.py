@@ -231,7 +231,8 @@ class Priors:
     ) -> Callable[[Values], Distribution]:
         """``prior.make`` with the checks that could not be made when compiling: the
         arguments' constraints (made inside ``make``) and the support against the domain."""
-        low_d, high_d = _bounds(domain)
+        # A finite domain holds the prior's values by construction: no bounds to check.
+        low_d, high_d = (None, None) if isinstance(domain, Finite) else _bounds(domain)
         path, source = self.path, self.source
 
         def make(values: Values) -> Distribution:
