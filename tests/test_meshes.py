@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import shapely
 
 from sppl.camera import Camera, look_at
 from sppl.errors import RenderError
@@ -72,3 +73,94 @@ def test_an_unknown_primitive_is_still_an_error(gl):
                 "c", 4, 4, 4.0, 4.0, 2.0, 2.0, look_at((0, -3, 1), (0, 0, 0))))
     finally:
         renderer.release()
+
+
+# ---- the other mesh formats: the same mesh as OBJ, PLY, STL and GLB ------------------------
+
+FORMATS = ("obj", "ply", "stl", "glb")
+
+
+@pytest.fixture(scope="module")
+def meshes_in_every_format(tmp_path_factory):
+    """The shipped mug and a box off centre, each written by trimesh in every format, and a
+    model per file whose class is that mesh, posed, in a folder of their own."""
+    import trimesh
+
+    folder = tmp_path_factory.mktemp("formats")
+    box = trimesh.creation.box(extents=(0.3, 0.2, 0.1))
+    box.apply_translation((0.1, -0.05, 0.05))  # off centre, resting on z = 0
+    shapes = {"mug": trimesh.load(MUG, force="mesh"), "box": box}
+    models = {}
+    for name, mesh in shapes.items():
+        for ext in FORMATS:
+            mesh.export(folder / f"{name}.{ext}")
+            model = folder / f"{name}_{ext}.scn"
+            model.write_text(
+                "class thing {\n"
+                "    count ~ poisson(1)\n"
+                "    x : real ~ normal(0, 0.1)\n"
+                "    y : real ~ normal(0, 0.1)\n"
+                "    a : periodic(2 * pi) ~ uniform(-pi, pi)\n"
+                "    k : positive ~ lognormal(0, 0.1)\n"
+                "    pose at (x, y) rotate a scale k\n"
+                f'    geometry mesh("{name}.{ext}") colour rgb(0.8, 0.3, 0.2)\n'
+                "}\n"
+            )
+            models[name, ext] = model
+    return shapes, models
+
+
+VALUES = {"x": 0.05, "y": -0.02, "a": 0.7, "k": 1.3}
+
+
+@pytest.mark.parametrize("ext", FORMATS[1:])
+@pytest.mark.parametrize("name", ("mug", "box"))
+def test_a_mesh_in_another_format_compiles_to_the_obj_shape(meshes_in_every_format, name, ext):
+    from sppl.lang import load_model
+
+    shapes, models = meshes_in_every_format
+    cls = load_model(models[name, ext]).object_class("thing")
+    obj = load_model(models[name, "obj"]).object_class("thing")
+    (part,) = cls.parts(VALUES)
+    (obj_part,) = obj.parts(VALUES)
+    assert part.primitive.endswith(f"{name}.{ext}")
+    np.testing.assert_allclose(part.matrix, obj_part.matrix)
+    # The same triangles, so the same bounds and the same derived footprint.
+    mesh, obj_mesh = unit_mesh(part.primitive), unit_mesh(obj_part.primitive)
+    assert len(mesh.faces) == len(obj_mesh.faces)
+    np.testing.assert_allclose(mesh.bounds, shapes[name].bounds, atol=1e-6)
+    np.testing.assert_allclose(mesh.bounds, obj_mesh.bounds, atol=1e-6)
+    assert mesh.area == pytest.approx(obj_mesh.area, rel=1e-6)
+    # Formats that store 32-bit floats move vertices by about 1e-8 of their size.
+    footprint = shapely.Polygon(cls.footprint(VALUES))
+    obj_footprint = shapely.Polygon(obj.footprint(VALUES))
+    assert footprint.symmetric_difference(obj_footprint).area < 1e-6 * obj_footprint.area
+    if name == "box":  # its outline seen from above, scaled by k
+        assert footprint.area == pytest.approx(0.3 * 0.2 * VALUES["k"] ** 2, rel=1e-6)
+
+
+@pytest.mark.parametrize("name", ("mug", "box"))
+def test_every_format_renders_like_the_obj(meshes_in_every_format, name, gl):
+    from sppl.lang import load_model
+
+    _, models = meshes_in_every_format
+    camera = Camera(
+        "c", 48, 36, 50.0, 50.0, 24.0, 18.0, look_at((0.35, -0.35, 0.35), (0.05, -0.02, 0.05))
+    )
+    renderer = Renderer()
+    try:
+        images = {
+            ext: renderer.render(load_model(models[name, ext]).object_class("thing").parts(VALUES),
+                                 camera)
+            for ext in FORMATS
+        }
+    finally:
+        renderer.release()
+    rgb, depth = images["obj"]
+    assert (depth < camera.depth_max).sum() > 100  # the object is in view
+    for ext in FORMATS[1:]:
+        other_rgb, other_depth = images[ext]
+        # Normals may be shaded per face in one format and per vertex in another: the depth
+        # is the same everywhere but on a few edge pixels, the colours close.
+        assert (np.abs(other_depth - depth) < 1e-4).mean() > 0.99, ext
+        assert (np.abs(other_rgb - rgb).max(axis=-1) < 0.1).mean() > 0.97, ext
