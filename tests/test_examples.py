@@ -62,6 +62,36 @@ def test_four_chain_script_runs(tmp_path, require_gl):
     assert_pngs(tmp_path / "images", ["three_shapes_traces.png", "three_shapes_occupancy.png"])
 
 
+RECOVER_MODELS = ("shapes", "blocks", "tabletop", "shapes_plus")
+
+
+@pytest.mark.parametrize("name", RECOVER_MODELS)
+def test_recover_scenes_are_scenes_of_their_model_and_in_view(name, require_gl):
+    """examples/models/MODEL/scene.json is a valid scene of models/MODEL.scn, every one of its
+    objects seen by every camera of cameras.json."""
+    import numpy as np
+
+    from sppl.lang import load_model
+    from sppl.observations import load_cameras
+    from sppl.render import Renderer
+    from sppl.simulate import load_scene
+
+    folder = ROOT / "examples" / "models" / name
+    model = load_model(ROOT / "models" / f"{name}.scn")
+    objects, noise = load_scene(model, folder / "scene.json")
+    assert len(objects) >= 3 and set(noise) == set(model.sensors)
+    renderer = Renderer(model.render)
+    try:
+        for spec in load_cameras(folder / "cameras.json"):
+            _, empty = renderer.render(model.static_parts, spec.camera)
+            for obj in objects:
+                _, depth = renderer.render([*model.static_parts, *obj.parts], spec.camera)
+                seen = (depth < empty - 1e-3).sum()
+                assert seen > 20, f"{obj.cls.name} covers {seen} pixels of {spec.camera.name}"
+    finally:
+        renderer.release()
+
+
 # -- the full runs: what docs/ shows ------------------------------------------------------------
 
 
@@ -224,3 +254,19 @@ def test_pixels_seen_is_zero_out_of_view_and_behind_another(root, require_gl):
     inside = {"class": "cube", "params": {**scene[0]["params"], "s": 0.2}}  # within the cube
     counts = pixels_seen(root / "models" / "shapes.scn", obs, [*scene, far, inside])
     assert all(c > 50 for c in counts[:3]) and counts[3:] == [0, 0], counts
+
+
+@pytest.mark.slow
+def test_recover_script_runs_for_every_model(tmp_path, require_gl):
+    """A smoke test of examples/models/recover.py: simulate and a short sample per model, and
+    the table (30 sweeps recover nothing, so the exit status is 1)."""
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "models" / "recover.py"),
+                        "--steps", "30", "--out", str(tmp_path)],
+                       capture_output=True, text=True, timeout=600, cwd=ROOT, check=False)
+    assert r.returncode in (0, 1), r.stderr[-3000:]
+    rows = [line for line in r.stdout.splitlines() if line.startswith("| `")]
+    assert [row.split("`")[1] for row in rows] == [f"{m}.scn" for m in RECOVER_MODELS], r.stdout
+    assert all(row.rstrip(" |").endswith(("yes", "**no**")) for row in rows)
+    for name in RECOVER_MODELS:
+        assert (tmp_path / name / "obs" / "scene.json").exists()
+        assert json.loads((tmp_path / name / "run" / "summary.json").read_text())["map"]
