@@ -205,7 +205,7 @@ def test_dependent_weights_that_break_are_reported_with_the_values():
         """
     ).object_class("thing")
     assert math.isfinite(cls.log_prior({"p": 0.5, "m": "wood"}))
-    with pytest.raises(ModelError, match=r"where p = 1.5: its weights must not be negative nor all"):
+    with pytest.raises(ModelError, match=r"where p = 1.5: its weights must not be negative"):
         cls.log_prior({"p": 1.5, "m": "wood"})
 
 
