@@ -6,9 +6,11 @@ be accepted is around one in a million. The refit jump instead *fits* the new ob
 observations first. It picks object k (uniform) and a class c (uniform), removes k, and runs
 a short deterministic search for the parameters of a c-object that maximise the posterior of
 the scene without k plus that object, starting from k's own values (by name) and its place.
-The proposal is then
+The proposal is then a mixture of the fit and a birth into x- (``sppl.birth``, the replace
+jump's proposal), so that a refit can also leave a state the fit does not explain:
 
-    y ~ q(y | x-, k) = N(continuous parameters; fitted, diag(tau^2))
+    y ~ q(y | x-, k) = (1 - MIX) q_fit(y | x-, k) + MIX q_birth(y | x-)
+    q_fit(y | x-, k) = N(continuous parameters; fitted, diag(tau^2))
                        x P(categorical parameters | fitted: the fitted value w.p. 1 - EPS)
                        x prior(integer parameters)
 
@@ -38,6 +40,8 @@ from .trace import SceneObject, Trace, make_object
 
 # Chance that a categorical parameter is not the fitted value (then uniform among the rest).
 EPS = 0.2
+# Share of refits drawn as a birth into the scene without the object instead of at the fit.
+MIX = 0.5
 # The search: passes over the continuous parameters, first step (in random-walk steps), and
 # how often a step is halved when no move improves the fit.
 START_STEP = 4.0
@@ -141,6 +145,11 @@ def log_density(cls: ObjectClass, values, fitted) -> float:
     return total
 
 
+def _log_mixture(sampler, state: Trace, cls: ObjectClass, values, fitted) -> float:
+    return float(np.logaddexp(math.log1p(-MIX) + log_density(cls, values, fitted),
+                              math.log(MIX) + sampler.birth.log_density(cls, values, state)))
+
+
 def _draw(cls: ObjectClass, fitted, rng: np.random.Generator) -> dict[str, Any]:
     values = dict(fitted)
     for p in cls.parameters:
@@ -173,14 +182,19 @@ def propose_refit(sampler, trace: Trace, rng: np.random.Generator, k: int | None
     # same whichever state it is reached from.
     state = state if state is not None else sampler.make_trace(rest, trace.noise)
     forward = fit(sampler, state, cls, old)
-    values = dict(target.values) if target is not None else _draw(cls, forward, rng)
+    if target is not None:
+        values = dict(target.values)
+    elif rng.random() < MIX:
+        values = sampler.birth.sample(cls, state, rng)
+    else:
+        values = _draw(cls, forward, rng)
     obj = target if target is not None else make_object(model, cls, values)
     objects = rest[:k] + (obj,) + rest[k:]
-    log_q_forward = log_density(cls, values, forward)
     if not math.isfinite(obj.log_prior):
         return Proposal("refit", old.cls.name, objects, trace.noise, (obj,), -math.inf,
                         tries=Refit(state, k))
+    log_q_forward = _log_mixture(sampler, state, cls, values, forward)
     back = fit(sampler, state, old.cls, obj)
-    log_q_back = log_density(old.cls, old.values, back)
+    log_q_back = _log_mixture(sampler, state, old.cls, old.values, back)
     return Proposal("refit", old.cls.name, objects, trace.noise, (obj,),
                     log_q_back - log_q_forward, tries=Refit(state, k))

@@ -28,17 +28,19 @@ def test_prior_recovery_with_refits():
     assert report.row("refit moves accepted").ok
 
 
-def test_prior_recovery_sees_a_refit_without_its_reverse_density(monkeypatch):
-    """A refit whose ratio leaves out q(old | x-, new): the proposal then looks symmetric when
-    it is not, the chain drifts towards the fitted values, and the check fails."""
-    real = fit.log_density
-    calls = {"n": 0}
+def test_prior_recovery_sees_a_refit_taken_for_symmetric(monkeypatch):
+    """A refit whose ratio takes the proposal for symmetric (the reverse density set to the
+    forward one): the chain drifts towards the fitted values, and the check fails."""
+    real = fit._log_mixture
+    last = {}
 
-    def forward_only(cls, values, fitted):
-        calls["n"] += 1
-        return real(cls, values, fitted) if calls["n"] % 2 else 0.0  # drop every back density
+    def symmetric(sampler, state, cls, values, fitted):
+        if "forward" in last:  # the second call of a proposal: the reverse density
+            return last.pop("forward")
+        last["forward"] = real(sampler, state, cls, values, fitted)
+        return last["forward"]
 
-    monkeypatch.setattr(fit, "log_density", forward_only)
+    monkeypatch.setattr(fit, "_log_mixture", symmetric)
     model = with_refit(toy_model([ball_class(rate=0.8), block_class(rate=0.5)]))
     report = verify.prior_recovery(model, sweeps=15000, seed=3)
     assert not report.passed, report.table()

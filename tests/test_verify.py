@@ -513,7 +513,7 @@ def test_adjoint_sweep_reverses_the_order_of_moves():
 def test_sppl_verify_shapes_quick(require_gl, root, capsys):
     """The shipped model, with short runs (the default length runs in the slow tests)."""
     code = cli.main(["verify", str(root / "models" / "shapes.scn"), "--steps", "3000",
-                     "--geweke-chains", "30", "--geweke-length", "8", "--seed", "1"])
+                     "--geweke-chains", "40", "--geweke-length", "10", "--seed", "1"])
     out = capsys.readouterr().out
     assert code == 0, out
     assert "quantity" in out and "p-value" in out and "PASS" in out
