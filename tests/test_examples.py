@@ -209,8 +209,9 @@ def test_the_claims_fail_on_output_that_contradicts_the_docs():
 
 @pytest.mark.slow
 def test_four_chains_on_three_shapes_agree_and_report_opens(tmp_path, require_gl):
-    """The issue's bar: R-hat of the number of objects below 1.05 on a 4-chain run with the
-    default settings, and its report opening in headless Chromium with nothing missing."""
+    """The bar docs/three_shapes.md sets: R-hat of the number of objects below 1.05 on a
+    4-chain run with the default settings, and its report opening in headless Chromium with
+    nothing missing."""
     from browser import check_page, find_chromium, require_chromium
 
     out = run_example("three_shapes/chains.py", "--out", tmp_path / "run",
