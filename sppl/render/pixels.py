@@ -217,9 +217,14 @@ class PixelScorer:
                    and (region is None or meets(d.rects[c], region))]
         if not visible:
             return
+        rows: dict[str, list[np.ndarray]] = {}
+        for d in visible:
+            for primitive, r in d.rows.items():
+                rows.setdefault(primitive, []).append(r)
         values = self._camera_uniforms[c]
-        for uniforms in self._uniforms.values():
-            for uniform, value in zip(uniforms, values):  # the sphere program's two more
+        # Only the programs this pass draws with get the camera's uniforms.
+        for sphere in {p in RAY_CAST for p in rows}:
+            for uniform, value in zip(self._uniforms[sphere], values):  # sphere's: two more
                 if isinstance(value, bytes):
                     uniform.write(value)
                 else:
@@ -231,10 +236,6 @@ class PixelScorer:
         while len(self._slots) <= b * len(self.cameras) + c:
             self._slots.append(_Slot())
         slot = self._slots[b * len(self.cameras) + c]
-        rows: dict[str, list[np.ndarray]] = {}
-        for d in visible:
-            for primitive, r in d.rows.items():
-                rows.setdefault(primitive, []).append(r)
         for primitive, chunks in rows.items():
             data = chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
             vao = self._vao(slot, primitive, data.nbytes)
