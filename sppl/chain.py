@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import fit, moves, tries
+from . import fit, merge, moves, tries
 from .birth import BirthProposal
 from .model import Model
 from .trace import Trace, noise_log_prior, objects_log_prior, overlaps_any
@@ -218,26 +218,36 @@ class Sampler:
     def load_state_dict(self, state: dict) -> None:
         self.warmup.load_state_dict(state["warmup"])
 
+    def jump_type(self, u: float) -> str:
+        """The jump type that a uniform draw ``u`` picks, in the order of ``moves.JUMPS``."""
+        total, last = 0.0, moves.JUMPS[0]
+        for kind in moves.JUMPS:
+            p = self.jump[kind]
+            if p > 0:
+                total += p
+                if u < total:
+                    return kind
+                last = kind
+        return last  # u within rounding of 1
+
     def propose_jump(self, trace: Trace) -> moves.Proposal | None:
-        u = self.rng.random()
-        if u >= 1.0 - self.jump["refit"]:
+        kind = self.jump_type(self.rng.random())
+        if kind == "refit":
             return fit.propose_refit(self, trace, self.rng)
-        u_replace = 1.0 - self.jump["replace"] - self.jump["refit"]
+        if kind == "merge":
+            return merge.propose_merge(self, trace, self.rng)
+        if kind == "split":
+            return merge.propose_split(self, trace, self.rng)
+        if kind == "change":
+            return moves.propose_change(self.model, trace, self.rng)
         m = self.model.inference.tries
         if m > 1:  # multiple-try births, deaths and replaces (sppl.tries)
-            if u < self.jump["birth"]:
-                return tries.propose_birth(self, trace, self.rng, m)
-            if u < self.jump["birth"] + self.jump["death"]:
-                return tries.propose_death(self, trace, self.rng, m)
-            if u >= u_replace:
-                return tries.propose_replace(self, trace, self.rng, m)
-            return moves.propose_change(self.model, trace, self.rng)
-        if u < self.jump["birth"]:
+            return {"birth": tries.propose_birth, "death": tries.propose_death,
+                    "replace": tries.propose_replace}[kind](self, trace, self.rng, m)
+        if kind == "birth":
             return moves.propose_birth(self.model, trace, self.rng, self.birth)
-        if u < self.jump["birth"] + self.jump["death"]:
+        if kind == "death":
             return moves.propose_death(self.model, trace, self.rng, self.birth)
-        if u < u_replace:
-            return moves.propose_change(self.model, trace, self.rng)
         return moves.propose_replace(
             self.model, trace, self.rng, self.birth, lambda objs: self.make_trace(objs, trace.noise)
         )

@@ -145,12 +145,12 @@ def log_density(cls: ObjectClass, values, fitted) -> float:
     return total
 
 
-def _log_mixture(sampler, state: Trace, cls: ObjectClass, values, fitted) -> float:
+def log_mixture(sampler, state: Trace, cls: ObjectClass, values, fitted) -> float:
     return float(np.logaddexp(math.log1p(-MIX) + log_density(cls, values, fitted),
                               math.log(MIX) + sampler.birth.log_density(cls, values, state)))
 
 
-def _draw(cls: ObjectClass, fitted, rng: np.random.Generator) -> dict[str, Any]:
+def draw(cls: ObjectClass, fitted, rng: np.random.Generator) -> dict[str, Any]:
     values = dict(fitted)
     for p in cls.parameters:
         if p.continuous:
@@ -163,6 +163,14 @@ def _draw(cls: ObjectClass, fitted, rng: np.random.Generator) -> dict[str, Any]:
         else:
             values[p.name] = p.sample(rng, values)
     return values
+
+
+def sample(sampler, state: Trace, cls: ObjectClass, fitted, rng: np.random.Generator):
+    """A draw of the values of a ``cls`` object from the refit proposal around ``fitted``:
+    the mixture whose density ``log_mixture`` gives."""
+    if rng.random() < MIX:
+        return sampler.birth.sample(cls, state, rng)
+    return draw(cls, fitted, rng)
 
 
 def propose_refit(sampler, trace: Trace, rng: np.random.Generator, k: int | None = None,
@@ -182,19 +190,15 @@ def propose_refit(sampler, trace: Trace, rng: np.random.Generator, k: int | None
     # same whichever state it is reached from.
     state = state if state is not None else sampler.make_trace(rest, trace.noise)
     forward = fit(sampler, state, cls, old)
-    if target is not None:
-        values = dict(target.values)
-    elif rng.random() < MIX:
-        values = sampler.birth.sample(cls, state, rng)
-    else:
-        values = _draw(cls, forward, rng)
+    values = dict(target.values) if target is not None else sample(sampler, state, cls, forward,
+                                                                    rng)
     obj = target if target is not None else make_object(model, cls, values)
     objects = rest[:k] + (obj,) + rest[k:]
     if not math.isfinite(obj.log_prior):
         return Proposal("refit", old.cls.name, objects, trace.noise, (obj,), -math.inf,
                         tries=Refit(state, k))
-    log_q_forward = _log_mixture(sampler, state, cls, values, forward)
+    log_q_forward = log_mixture(sampler, state, cls, values, forward)
     back = fit(sampler, state, old.cls, obj)
-    log_q_back = _log_mixture(sampler, state, old.cls, old.values, back)
+    log_q_back = log_mixture(sampler, state, old.cls, old.values, back)
     return Proposal("refit", old.cls.name, objects, trace.noise, (obj,),
                     log_q_back - log_q_forward, tries=Refit(state, k))

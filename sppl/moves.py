@@ -25,12 +25,12 @@ from .birth import BirthProposal
 from .model import Model, ObjectClass
 from .trace import SceneObject, Trace, make_object
 
-JUMPS = ("birth", "death", "change", "replace", "refit")
+JUMPS = ("birth", "death", "change", "replace", "refit", "merge", "split")
 
 
 @dataclass(frozen=True, eq=False)
 class Proposal:
-    move: str  # "parameters", "birth", "death", "change", "replace" or "noise"
+    move: str  # "parameters", "noise", or a jump of JUMPS
     label: str  # class name, or sensor kind for noise moves: acceptance is counted per label
     objects: tuple[SceneObject, ...]
     noise: Mapping[str, Mapping[str, float]]

@@ -31,7 +31,7 @@ def test_prior_recovery_with_refits():
 def test_prior_recovery_sees_a_refit_taken_for_symmetric(monkeypatch):
     """A refit whose ratio takes the proposal for symmetric (the reverse density set to the
     forward one): the chain drifts towards the fitted values, and the check fails."""
-    real = fit._log_mixture
+    real = fit.log_mixture
     last = {}
 
     def symmetric(sampler, state, cls, values, fitted):
@@ -40,7 +40,7 @@ def test_prior_recovery_sees_a_refit_taken_for_symmetric(monkeypatch):
         last["forward"] = real(sampler, state, cls, values, fitted)
         return last["forward"]
 
-    monkeypatch.setattr(fit, "_log_mixture", symmetric)
+    monkeypatch.setattr(fit, "log_mixture", symmetric)
     model = with_refit(toy_model([ball_class(rate=0.8), block_class(rate=0.5)]))
     report = verify.prior_recovery(model, sweeps=15000, seed=3)
     assert not report.passed, report.table()

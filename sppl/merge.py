@@ -1,0 +1,187 @@
+"""The merge and split jumps: two objects that share one object's pixels become one fitted
+object, and one object becomes a fitted object and a newborn.
+
+A chain that explained a cube with two smaller cubes early on cannot leave that explanation one
+object at a time: the death of either small cube uncovers half the cube's pixels and costs
+thousands of nats, and a refit of either is fitted with the other still there, so it fits the
+half that is left. A merge removes object i and refits object j in the scene without both,
+so the fit can grow j over the pixels i explained:
+
+    merge (x- + i + j -> x- + y): i uniform among the n objects, j among the others with
+        probability w(i, j) / sum_l w(i, l),  w(i, j) = exp(-|p_i - p_j|^2 / (2 R^2)),
+        where p is an object's ground position (w = 1 for a class without one), and y from
+        the refit proposal of a uniform class into x- starting from j (sppl.fit);
+    split (x- + y -> x- + i + j): y uniform among the n - 1 objects, j from the refit proposal
+        of a uniform class into x- = the scene without y, starting from y, and i a birth of a
+        uniform class into x- (sppl.birth: near what x- leaves unexplained, or the prior).
+
+A split is a merge's reverse: both go through the same x-, so the fits that the densities
+depend on are the same both ways, and with K classes
+
+    log alpha_merge = log pi(x- + y) - log pi(x- + i + j)
+                      + log P(split) - log(n - 1) - log K + log q_fit(j | x-, y)
+                      + log q_birth(i | x-)
+                      - log P(merge) + log n - log w(i, j) + log sum_l w(i, l) - log q_fit(y | x-, j)
+
+(the class choices: one K for y's, two for j's and i's). Which object is born and which is
+fitted are roles the move chooses, not part of the scene; a merge with its roles is undone by
+exactly one split with the same roles, which is all detailed balance needs. The places in the
+tuple are uniform, as for a birth, and carry no density. docs/inference.md has the derivation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import fit as fitting
+from .moves import Proposal, _log
+from .trace import SceneObject, Trace, make_object
+
+# The distance at which a merge partner is e^(-1/2) times as likely as one in the same place,
+# in metres: objects that share one object's pixels stand within about an object's size.
+RADIUS = 0.5
+
+
+def partner_log_weights(objects, i: int) -> np.ndarray:
+    """log P(j | i) of a merge over the places j of ``objects`` (-inf at i itself)."""
+    def position(o: SceneObject):
+        return (o.values[o.cls.position[0]], o.values[o.cls.position[1]]) if o.cls.position \
+            else None
+
+    here = position(objects[i])
+    logw = np.zeros(len(objects))
+    for j, o in enumerate(objects):
+        there = position(o)
+        if j == i:
+            logw[j] = -math.inf
+        elif here is not None and there is not None:
+            d2 = (here[0] - there[0]) ** 2 + (here[1] - there[1]) ** 2
+            logw[j] = -0.5 * d2 / RADIUS**2
+    return logw - np.logaddexp.reduce(logw)
+
+
+@dataclass(frozen=True)
+class MergeSplit:
+    """What a merge or split used, for its reverse: the scene x- without the objects it took
+    out, and the places, in the tuple that has both, of the fitted object and of the other
+    one (the merged-away object, or the newborn)."""
+
+    state: Trace
+    fitted_place: int
+    other_place: int
+
+    def reverse(self, sampler, before: Trace, proposal: Proposal, after: Trace) -> Proposal:
+        # The place of the single object, in the tuple without the other one.
+        single = self.fitted_place - (self.other_place < self.fitted_place)
+        if proposal.move == "merge":
+            return propose_split(sampler, after, sampler.rng, k=single, state=self.state,
+                                 fitted=before.objects[self.fitted_place],
+                                 born=before.objects[self.other_place],
+                                 born_place=self.other_place)
+        return propose_merge(sampler, after, sampler.rng, i=self.other_place,
+                             j=self.fitted_place, state=self.state,
+                             target=before.objects[single])
+
+
+def log_q_born(sampler, obj: SceneObject, state: Trace) -> float:
+    """log q_birth of a split's newborn in the scene x- (its class chosen apart)."""
+    return sampler.birth.log_density(obj.cls, obj.values, state)
+
+
+def _without(objects, *places) -> tuple:
+    return tuple(o for p, o in enumerate(objects) if p not in places)
+
+
+def _refitted(sampler, state: Trace, like: SceneObject, rng: np.random.Generator,
+              target: SceneObject | None) -> tuple[SceneObject, dict]:
+    """A draw from the refit proposal of a uniform class into ``state``, starting from
+    ``like`` (or exactly ``target``), and the fit it is drawn around."""
+    model = sampler.model
+    cls = target.cls if target is not None else model.classes[
+        int(rng.integers(len(model.classes)))]
+    forward = fitting.fit(sampler, state, cls, like)
+    if target is None:
+        target = make_object(model, cls, fitting.sample(sampler, state, cls, forward, rng))
+    return target, forward
+
+
+def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None = None,
+                  j: int | None = None, state: Trace | None = None,
+                  target: SceneObject | None = None) -> Proposal | None:
+    """Merge object i (uniform) into object j (near it) as a fitted object of a uniform
+    class; given ``target``, the proposal of exactly that object (a split's reverse)."""
+    objects = trace.objects
+    n = len(objects)
+    if n < 2:
+        return None
+    model = sampler.model
+    n_classes = len(model.classes)
+    i = int(rng.integers(n)) if i is None else i
+    logw = partner_log_weights(objects, i)
+    if j is None:
+        j = int(rng.choice(n, p=np.exp(logw)))
+    gone, old = objects[i], objects[j]
+    rest = _without(objects, i, j)
+    state = state if state is not None else sampler.make_trace(rest, trace.noise)
+    new, forward = _refitted(sampler, state, old, rng, target)
+    cls = new.cls
+    merged = objects[:j] + (new,) + objects[j + 1 :]
+    merged = merged[:i] + merged[i + 1 :]
+    tag = MergeSplit(state, j, i)
+    if not math.isfinite(new.log_prior):
+        return Proposal("merge", old.cls.name, merged, trace.noise, (new,), -math.inf, tries=tag)
+    log_q_forward = (_log(sampler.jump["merge"]) - math.log(n) + float(logw[j])
+                     - math.log(n_classes)
+                     + fitting.log_mixture(sampler, state, cls, new.values, forward))
+    back = fitting.fit(sampler, state, old.cls, new)
+    log_q_back = (_log(sampler.jump["split"]) - math.log(n - 1) - 2 * math.log(n_classes)
+                  + fitting.log_mixture(sampler, state, old.cls, old.values, back)
+                  + log_q_born(sampler, gone, state))
+    return Proposal("merge", old.cls.name, merged, trace.noise, (new,),
+                    log_q_back - log_q_forward, tries=tag)
+
+
+def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None = None,
+                  state: Trace | None = None, fitted: SceneObject | None = None,
+                  born: SceneObject | None = None, born_place: int | None = None
+                  ) -> Proposal | None:
+    """Split object k (uniform) into a fitted object of a uniform class in its place and a
+    birth of a uniform class; given ``fitted`` and ``born`` (and ``born_place``), the
+    proposal of exactly those (a merge's reverse)."""
+    objects = trace.objects
+    m = len(objects)
+    if m < 1:
+        return None
+    model = sampler.model
+    n_classes = len(model.classes)
+    k = int(rng.integers(m)) if k is None else k
+    old = objects[k]
+    rest = _without(objects, k)
+    state = state if state is not None else sampler.make_trace(rest, trace.noise)
+    fitted, forward = _refitted(sampler, state, old, rng, fitted)
+    if born is None:
+        born_cls = model.classes[int(rng.integers(n_classes))]
+        born = make_object(model, born_cls, sampler.birth.sample(born_cls, state, rng))
+        born_place = int(rng.integers(m + 1))
+    replaced = objects[:k] + (fitted,) + objects[k + 1 :]
+    split = replaced[:born_place] + (born,) + replaced[born_place:]
+    j = k + (born_place <= k)  # the fitted object's place with the newborn in
+    tag = MergeSplit(state, j, born_place)
+    if not (math.isfinite(fitted.log_prior) and math.isfinite(born.log_prior)):
+        return Proposal("split", old.cls.name, split, trace.noise, (fitted, born), -math.inf,
+                        tries=tag)
+    n = m + 1
+    log_q_forward = (_log(sampler.jump["split"]) - math.log(m) - 2 * math.log(n_classes)
+                     + fitting.log_mixture(sampler, state, fitted.cls, fitted.values, forward)
+                     + log_q_born(sampler, born, state))
+    logw = partner_log_weights(split, born_place)
+    back = fitting.fit(sampler, state, old.cls, fitted)
+    log_q_back = (_log(sampler.jump["merge"]) - math.log(n) + float(logw[j])
+                  - math.log(n_classes)
+                  + fitting.log_mixture(sampler, state, old.cls, old.values, back))
+    return Proposal("split", old.cls.name, split, trace.noise, (fitted, born),
+                    log_q_back - log_q_forward, tries=tag)
+
