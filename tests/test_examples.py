@@ -55,11 +55,18 @@ def test_fusion_prints_its_table(tmp_path, require_gl):
     assert len(rows) == 3 and all(r.split()[-1] in ("yes", "no") for r in rows)
 
 
-def test_four_chain_script_runs(tmp_path, require_gl):
-    out = run_example("three_shapes/chains.py", "--steps", "60", "--chains", "2",
+def test_four_chain_script_runs_and_its_report_opens(tmp_path, require_gl):
+    """The script of docs/three_shapes.md, short: four chains on the shipped example, their
+    report, and that report in headless Chromium with no missing image and no script error
+    (the full-length run's page is checked by the slow test below)."""
+    from browser import check_page, require_chromium
+
+    out = run_example("three_shapes/chains.py", "--steps", "60", "--chains", "4",
                       "--out", tmp_path / "run", "--images", tmp_path / "images")
-    assert "n_objects" in out and "chain 1:" in out
+    assert "n_objects" in out and "chain 3:" in out
     assert_pngs(tmp_path / "images", ["three_shapes_traces.png", "three_shapes_occupancy.png"])
+    page = check_page(tmp_path / "run" / "report" / "index.html", require_chromium())
+    assert page.images >= 6 and not page.problems, (page.images, page.problems)
 
 
 RECOVER_MODELS = ("shapes", "blocks", "tabletop", "shapes_plus")
