@@ -8,9 +8,11 @@ half that is left. A merge removes object i and refits object j in the scene wit
 so the fit can grow j over the pixels i explained:
 
     merge (x- + i + j -> x- + y): i uniform among the n objects, j among the others with
-        probability w(i, j) / sum_l w(i, l),  w(i, j) = exp(-|p_i - p_j|^2 / (2 R^2)),
-        where p is an object's ground position (w = 1 for a class without one), and y from
-        the refit proposal of a uniform class into x- starting from j (sppl.fit);
+        probability w(i, j) / sum_l w(i, l), where w(i, j) = exp(-|p_i - p_j|^2 / (2 R^2))
+        with p an object's ground position, or exp(-g^2 / (2 P^2)) with g the pixels between
+        the two objects' rectangles in the camera where they are nearest, whichever is larger
+        (w = 1 where neither applies), and y from the refit proposal of a uniform class into
+        x- starting from j (sppl.fit);
     split (x- + y -> x- + i + j): y uniform among the n - 1 objects, j from the refit proposal
         of a uniform class into x- = the scene without y, starting from y, and i a birth of a
         uniform class into x- (sppl.birth: near what x- leaves unexplained, or the prior).
@@ -40,27 +42,56 @@ from . import fit as fitting
 from .moves import Proposal, _log
 from .trace import SceneObject, Trace, make_object
 
-# The distance at which a merge partner is e^(-1/2) times as likely as one in the same place,
-# in metres: objects that share one object's pixels stand within about an object's size.
+# How near a merge partner is looked for: at RADIUS metres on the ground, or PIXELS pixels
+# apart in a camera's image, a partner is e^(-1/2) times as likely as one in the same place.
+# Two objects that share one object's pixels stand within about an object's size, or, seen
+# along a camera's ray, anywhere on it: a small object far behind a cone that paints the
+# cone's tip is near it in the image only.
 RADIUS = 0.5
+PIXELS = 4.0
 
 
-def partner_log_weights(objects, i: int) -> np.ndarray:
-    """log P(j | i) of a merge over the places j of ``objects`` (-inf at i itself)."""
+def partner_log_weights(objects, i: int, screen=None) -> np.ndarray:
+    """log P(j | i) of a merge over the places j of ``objects`` (-inf at i itself).
+    ``screen(o)``, where the scorer knows the cameras, gives the pixel rectangle an object
+    covers in each camera (None where out of view); the nearer of the two measures counts."""
     def position(o: SceneObject):
         return (o.values[o.cls.position[0]], o.values[o.cls.position[1]]) if o.cls.position \
             else None
 
     here = position(objects[i])
+    rects = screen(objects[i]) if screen is not None else None
     logw = np.zeros(len(objects))
     for j, o in enumerate(objects):
-        there = position(o)
         if j == i:
             logw[j] = -math.inf
-        elif here is not None and there is not None:
+            continue
+        near = []
+        there = position(o)
+        if here is not None and there is not None:
             d2 = (here[0] - there[0]) ** 2 + (here[1] - there[1]) ** 2
-            logw[j] = -0.5 * d2 / RADIUS**2
+            near.append(-0.5 * d2 / RADIUS**2)
+        if rects is not None:
+            gaps = [_gap(a, b) for a, b in zip(rects, screen(o))
+                    if a is not None and b is not None]
+            if gaps:
+                near.append(-0.5 * min(gaps) ** 2 / PIXELS**2)
+        logw[j] = max(near) if near else 0.0
     return logw - np.logaddexp.reduce(logw)
+
+
+def _gap(a, b) -> float:
+    """Pixels between two rectangles (rows r0..r1, columns c0..c1); 0 where they meet."""
+    rows = max(0, a[0] - b[1], b[0] - a[1])
+    cols = max(0, a[2] - b[3], b[2] - a[3])
+    return math.hypot(rows, cols)
+
+
+def screen_of(sampler):
+    """The pixel rectangles of an object per camera, from the fast scorer's cache; None
+    for a scorer that keeps none (the prior's, the reference path's)."""
+    draws = getattr(sampler.scorer, "draws", None)
+    return None if draws is None else (lambda o: draws.of_object(o).rects)
 
 
 @dataclass(frozen=True)
@@ -120,7 +151,7 @@ def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None
     model = sampler.model
     n_classes = len(model.classes)
     i = int(rng.integers(n)) if i is None else i
-    logw = partner_log_weights(objects, i)
+    logw = partner_log_weights(objects, i, screen_of(sampler))
     if j is None:
         j = int(rng.choice(n, p=np.exp(logw)))
     gone, old = objects[i], objects[j]
@@ -177,7 +208,7 @@ def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None
     log_q_forward = (_log(sampler.jump["split"]) - math.log(m) - 2 * math.log(n_classes)
                      + fitting.log_mixture(sampler, state, fitted.cls, fitted.values, forward)
                      + log_q_born(sampler, born, state))
-    logw = partner_log_weights(split, born_place)
+    logw = partner_log_weights(split, born_place, screen_of(sampler))
     back = fitting.fit(sampler, state, old.cls, fitted)
     log_q_back = (_log(sampler.jump["merge"]) - math.log(n) + float(logw[j])
                   - math.log(n_classes)

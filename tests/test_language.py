@@ -137,7 +137,7 @@ def test_shapes_sensors_render_and_inference(shapes):
     assert shapes.render.background == (0.5, 0.5, 0.5)
     assert shapes.render.ambient == 0.35
     assert shapes.render.light == (0.4, -0.3, 1.0)
-    assert shapes.inference.p_jump == pytest.approx(1 / 2)
+    assert shapes.inference.p_jump == pytest.approx(1)
     assert shapes.no_overlap
     assert shapes.colours["green"] == (0.15, 0.70, 0.20)
 
