@@ -3,6 +3,11 @@
 One *sweep* is: a parameter move for every object (each block of its parameters in turn);
 then, with probability ``p_jump``, one model jump (birth, death or change, by their weights);
 then a move of every noise parameter. ``Sampler.sweep`` performs one sweep.
+
+A sweep is written as a generator (``Sampler.sweep_steps``) that yields each proposal's
+final evaluation as a request, (trace, proposal), and is sent the evaluated trace back, so
+that a driver can evaluate the requests of several chains together (``sppl.lockstep``);
+``Sampler.sweep`` answers each request itself with ``Sampler.evaluate``.
 """
 
 from __future__ import annotations
@@ -62,6 +67,35 @@ def accept(log_alpha: float, rng: np.random.Generator) -> bool:
     return (math.log(u) if u > 0.0 else -math.inf) < log_alpha
 
 
+def evaluate_batch(requests) -> list[Trace | None]:
+    """``Sampler.evaluate`` of several (sampler, trace, proposal) whose samplers share one
+    scorer, with the same answers: each proposal's prior is checked first, then the scorer
+    is asked once for every proposal that needs a render (``evaluate_batch``), which lets
+    it draw them together."""
+    out: list[Trace | None] = [None] * len(requests)
+    pending = []
+    for i, (sampler, trace, proposal) in enumerate(requests):
+        log_prior = sampler.proposal_log_prior(proposal)
+        if log_prior is None:
+            continue
+        if proposal.move == "noise":
+            out[i] = sampler.scored(proposal, log_prior, trace.stats, trace.renders)
+        else:
+            pending.append((i, log_prior))
+    if not pending:
+        return out
+    scorer = requests[0][0].scorer
+    asked = [(requests[i][2].objects, requests[i][1]) for i, _ in pending]
+    if hasattr(scorer, "evaluate_batch"):
+        answers = scorer.evaluate_batch(asked)
+    else:  # a scorer of the plain protocol (evaluate and log_likelihood)
+        answers = [scorer.evaluate(objects, parent=parent) for objects, parent in asked]
+    for (i, log_prior), (stats, renders) in zip(pending, answers):
+        sampler, _, proposal = requests[i]
+        out[i] = sampler.scored(proposal, log_prior, stats, renders)
+    return out
+
+
 class Sampler:
     """Advances one chain. ``scorer`` renders and scores; ``rng`` is the chain's only randomness."""
 
@@ -102,6 +136,23 @@ class Sampler:
     def evaluate(self, trace: Trace, proposal: moves.Proposal) -> Trace | None:
         """The proposed trace, or None where its prior is zero (out of a domain, overlapping),
         which is decided before anything is rendered."""
+        log_prior = self.proposal_log_prior(proposal)
+        if log_prior is None:
+            return None
+        if proposal.move == "noise":
+            stats, renders = trace.stats, trace.renders
+        else:
+            # Given the current trace, the scorer re-renders only what the move changed.
+            stats, renders = self.scorer.evaluate(proposal.objects, parent=trace)
+        return self.scored(proposal, log_prior, stats, renders)
+
+    def evaluate_batch(self, requests) -> list[Trace | None]:
+        """``evaluate`` of several (trace, proposal) pairs, rendered together where the scorer
+        can."""
+        return evaluate_batch([(self, trace, proposal) for trace, proposal in requests])
+
+    def proposal_log_prior(self, proposal: moves.Proposal) -> float | None:
+        """The proposed state's log prior, or None where it is zero; nothing is rendered."""
         if any(not math.isfinite(o.log_prior) for o in proposal.changed):
             return None
         if self.model.no_overlap and any(overlaps_any(o, proposal.objects) for o in proposal.changed):
@@ -109,20 +160,23 @@ class Sampler:
         log_prior = objects_log_prior(self.model, proposal.objects) + noise_log_prior(
             self.model, proposal.noise
         )
-        if not math.isfinite(log_prior):
-            return None
-        if proposal.move == "noise":
-            stats, renders = trace.stats, trace.renders
-        else:
-            # Given the current trace, the scorer re-renders only what the move changed.
-            stats, renders = self.scorer.evaluate(proposal.objects, parent=trace)
+        return log_prior if math.isfinite(log_prior) else None
+
+    def scored(self, proposal: moves.Proposal, log_prior: float, stats, renders) -> Trace:
+        """The proposed trace from its log prior and the scorer's answer for its objects."""
         log_lik = self.scorer.log_likelihood(stats, proposal.noise)
         return Trace(
             self.model, proposal.objects, proposal.noise, stats, log_prior, log_lik, renders
         )
 
     def step(self, trace: Trace, proposal: moves.Proposal | None) -> Trace:
-        """Metropolis-Hastings accept/reject, in log space.
+        """Metropolis-Hastings accept/reject of one proposal, evaluated here (``decide``)."""
+        return self.drive(self.decide(trace, proposal))
+
+    def decide(self, trace: Trace, proposal: moves.Proposal | None):
+        """Metropolis-Hastings accept/reject, in log space, as a generator: it yields
+        (trace, proposal) to have the proposal evaluated, is sent ``evaluate``'s answer, and
+        returns the chain's next trace.
 
         A NaN ratio (a likelihood or proposal density that broke down on a degenerate scene,
         or two states that both have zero density) says nothing about the target: the
@@ -131,7 +185,7 @@ class Sampler:
         """
         if proposal is None:
             return trace
-        new = self.evaluate(trace, proposal)
+        new = yield trace, proposal
         if new is None:
             self.stats.record(proposal.move, proposal.label, False)
             return trace
@@ -143,6 +197,16 @@ class Sampler:
         accepted = accept(log_alpha, self.rng)
         self.stats.record(proposal.move, proposal.label, accepted)
         return new if accepted else trace
+
+    def drive(self, steps):
+        """Run a generator of ``decide``'s kind to its end, answering every request with
+        ``evaluate``; its return value."""
+        try:
+            request = next(steps)
+            while True:
+                request = steps.send(self.evaluate(*request))
+        except StopIteration as end:
+            return end.value
 
     def log_alpha(self, trace: Trace, proposal: moves.Proposal, new: Trace) -> float:
         """log of the Metropolis-Hastings ratio of moving from ``trace`` to ``new`` (during an
@@ -161,52 +225,59 @@ class Sampler:
     # -- the schedule -------------------------------------------------------------------------
 
     def sweep(self, trace: Trace) -> Trace:
+        return self.drive(self.sweep_steps(trace))
+
+    def adjoint_sweep(self, trace: Trace) -> Trace:
+        return self.drive(self.adjoint_sweep_steps(trace))
+
+    def sweep_steps(self, trace: Trace):
+        """One sweep, as a generator of evaluation requests (see ``decide``)."""
         m, rng = self.model, self.rng
         for k in range(len(trace.objects)):
             for block in moves.parameter_blocks(trace.objects[k].cls):
-                trace = self._parameter_step(trace, k, block)
+                trace = yield from self._parameter_step(trace, k, block)
         if rng.random() < m.inference.p_jump:
-            trace = self.step(trace, self.propose_jump(trace))
+            trace = yield from self.decide(trace, self.propose_jump(trace))
         for kind, sensor in m.sensors.items():
             for p in sensor.noise:
-                trace = self._noise_step(trace, kind, p.name)
+                trace = yield from self._noise_step(trace, kind, p.name)
         self.warmup.sweep += 1
         return trace
 
-    def adjoint_sweep(self, trace: Trace) -> Trace:
+    def adjoint_sweep_steps(self, trace: Trace):
         """The time reversal of ``sweep``: its moves in the opposite order.
 
         Every move is reversible, so a sweep's adjoint with respect to the posterior is the
         same moves in reverse order. Running it backwards from a posterior draw gives the past
         of a stationary chain, which simulation-based calibration uses (``sppl.verify.sbc``).
-        Keep it the mirror image of ``sweep``.
+        Keep it the mirror image of ``sweep_steps``.
         """
         m, rng = self.model, self.rng
         for kind, sensor in reversed(list(m.sensors.items())):
             for p in reversed(sensor.noise):
-                trace = self._noise_step(trace, kind, p.name)
+                trace = yield from self._noise_step(trace, kind, p.name)
         if rng.random() < m.inference.p_jump:
-            trace = self.step(trace, self.propose_jump(trace))
+            trace = yield from self.decide(trace, self.propose_jump(trace))
         for k in reversed(range(len(trace.objects))):
             for block in reversed(moves.parameter_blocks(trace.objects[k].cls)):
-                trace = self._parameter_step(trace, k, block)
+                trace = yield from self._parameter_step(trace, k, block)
         self.warmup.sweep += 1
         return trace
 
-    def _parameter_step(self, trace: Trace, k: int, block: tuple[str, ...]) -> Trace:
+    def _parameter_step(self, trace: Trace, k: int, block: tuple[str, ...]):
         site = f"{trace.objects[k].cls.name}/{'+'.join(block)}"
         proposal = moves.propose_parameters(self.model, trace, k, block, self.rng,
                                             self.warmup.factor(site))
-        new = self.step(trace, proposal)
+        new = yield from self.decide(trace, proposal)
         if trace.objects[k].cls.parameter(block[0]).continuous:
             self.warmup.record(site, new is not trace)
         return new
 
-    def _noise_step(self, trace: Trace, kind: str, name: str) -> Trace:
+    def _noise_step(self, trace: Trace, kind: str, name: str):
         site = f"noise/{kind}.{name}"
         proposal = moves.propose_noise(self.model, trace, kind, name, self.rng,
                                        self.warmup.factor(site))
-        new = self.step(trace, proposal)
+        new = yield from self.decide(trace, proposal)
         self.warmup.record(site, new is not trace)
         return new
 

@@ -93,6 +93,11 @@ class ReferenceScorer:
         }
         return stats, rendered
 
+    def evaluate_batch(self, requests):
+        """``evaluate`` of several (objects, parent) pairs, in order. This path renders one
+        hypothesis at a time; ``Scorer`` draws them together where it can."""
+        return [self.evaluate(objects, parent=parent) for objects, parent in requests]
+
     def statistics(self, objects) -> dict[tuple[int, str], np.ndarray]:
         return self.evaluate(objects)[0]
 
@@ -221,13 +226,30 @@ class Scorer(ReferenceScorer):
     def evaluate(self, objects, parent=None):
         if self.pixels is None:
             return super().evaluate(objects)
-        parts = self.parts(objects)
+        return self._from_parent(objects, parent) or self.evaluate_many([objects])[0]
+
+    def evaluate_batch(self, requests):
+        """``evaluate`` of several (objects, parent) pairs, in order, with the same results:
+        each that its parent can score incrementally is scored so (its regions are rendered
+        on their own), and all the others are drawn together before one read-back."""
+        if self.pixels is None:
+            return super().evaluate_batch(requests)
+        out = [self._from_parent(objects, parent) for objects, parent in requests]
+        full = [i for i, result in enumerate(out) if result is None]
+        if full:
+            for i, result in zip(full, self.evaluate_many([requests[i][0] for i in full])):
+                out[i] = result
+        return out
+
+    def _from_parent(self, objects, parent):
+        """``evaluate``'s answer scored incrementally from the parent trace, or None where
+        there is no parent of this scorer's or a full render is cheaper."""
         before = getattr(parent, "renders", None)
         if isinstance(before, Renders) and before.scorer is self and before.pixels is not None:
             pixels = self._incremental(parent.objects, objects, before.pixels)
             if pixels is not None:
-                return self._stats(pixels.sums), Renders(self, parts, pixels)
-        return self.evaluate_many([objects])[0]
+                return self._stats(pixels.sums), Renders(self, self.parts(objects), pixels)
+        return None
 
     def evaluate_many(self, hypotheses):
         """``evaluate`` for several object sets at once, all drawn before one read-back."""
@@ -292,6 +314,9 @@ class PriorScorer:
 
     def evaluate(self, objects, parent=None):
         return {}, {}
+
+    def evaluate_batch(self, requests):
+        return [({}, {}) for _ in requests]
 
     def statistics(self, objects) -> dict[tuple[int, str], np.ndarray]:
         return {}

@@ -59,11 +59,13 @@ def _draw(sampler, state: Trace, n: int, rng: np.random.Generator) -> list[Scene
 
 def _log_weights(sampler, state: Trace, candidates) -> np.ndarray:
     """log w(y) = log pi(state + y) - log Q(y | state) of each candidate; -inf for one of zero
-    prior (out of its domain, overlapping), which is not rendered."""
+    prior (out of its domain, overlapping), which is not rendered. The candidates are scored
+    together, so that a scorer can draw them in one pass."""
+    proposals = [Proposal("birth", obj.cls.name, state.objects + (obj,), state.noise, (obj,))
+                 for obj in candidates]
+    scored = sampler.evaluate_batch([(state, p) for p in proposals])
     out = np.full(len(candidates), -math.inf)
-    for i, obj in enumerate(candidates):
-        p = Proposal("birth", obj.cls.name, state.objects + (obj,), state.noise, (obj,))
-        new = sampler.evaluate(state, p)
+    for i, (obj, new) in enumerate(zip(candidates, scored)):
         if new is not None and math.isfinite(new.score):
             out[i] = new.score - log_q_birth(sampler.model, obj.cls, obj.values, sampler.birth,
                                              state)

@@ -487,7 +487,7 @@ def test_adjoint_sweep_reverses_the_order_of_moves():
     order = {}
 
     class Recording(Sampler):
-        def step(self, trace, proposal):
+        def decide(self, trace, proposal):
             if proposal is not None and proposal.move == "parameters":
                 k = next(i for i, o in enumerate(proposal.objects) if o is proposal.changed[0])
                 old, new = trace.objects[k].values, proposal.changed[0].values
@@ -495,6 +495,7 @@ def test_adjoint_sweep_reverses_the_order_of_moves():
             elif proposal is not None:
                 self.seen.append((proposal.move, proposal.label))
             return trace  # reject everything: the states stay put
+            yield  # decide is a generator that asks for evaluations; this one asks for none
 
     for name in ("sweep", "adjoint_sweep"):
         sampler = Recording(replace(model, inference=InferenceSettings(p_jump=0.0)),
