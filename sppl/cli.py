@@ -85,6 +85,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="independent chains, run in parallel processes, each into "
                    "OUT/chain_<i>/ with its own stream of --seed; OUT/summary.json pools them "
                    "and gives R-hat (default: 1, written straight into OUT)")
+    r.add_argument("--lockstep", action="store_true", default=None,
+                   help="run the --chains in this one process instead, advanced together and "
+                   "their hypotheses rendered in one pass; the same samples as in processes")
     r.add_argument("--resume", type=Path, default=None, metavar="RUN",
                    help="continue the stopped run in RUN from its checkpoints, with its model, "
                    "observations, seed, thin and chains, up to --steps sweeps in all; the samples "
@@ -328,6 +331,7 @@ def cmd_sample(args) -> int:
         args.seed = 0 if args.seed is None else args.seed
         args.thin = 1 if args.thin is None else args.thin
         args.chains = 1 if args.chains is None else args.chains
+        args.lockstep = bool(args.lockstep)
     if args.steps < 1 or args.thin < 1 or args.chains < 1:
         raise UsageError("--steps, --thin and --chains must be at least 1")
     if not args.checkpoint_every >= 0:
@@ -341,6 +345,7 @@ def cmd_sample(args) -> int:
         model, obs, args.out, chains=args.chains, steps=args.steps, seed=args.seed,
         thin=args.thin, burn=args.burn, progress=False if args.quiet else None,
         resume=args.resume is not None, checkpoint_seconds=args.checkpoint_every,
+        lockstep=args.lockstep,
     )
     print(format_summary(result.summary))
     samples = args.out / ("samples.jsonl" if args.chains == 1 else "chain_*/samples.jsonl")
@@ -377,6 +382,11 @@ def _resume_settings(args) -> None:
             raise UsageError(f"--{option} {given} differs from the run's ({recorded}); a resumed "
                              f"run keeps its --{option}")
         setattr(args, option, recorded)
+    recorded = bool(meta.get("lockstep", False))
+    if args.lockstep is not None and args.lockstep != recorded and args.chains > 1:
+        raise UsageError(f"{run} ran its chains in parallel processes; a resumed run keeps "
+                         "them there, so leave out --lockstep")
+    args.lockstep = recorded
     args.steps = meta["steps"] if args.steps is None else args.steps
     args.burn = meta.get("burn") if args.burn is None else args.burn
     if args.steps <= steps_done:

@@ -99,111 +99,152 @@ def run_chain(
     ``callback(step, trace, best, sampler)``, if given, is called after every sweep; returning
     True stops the run. ``seed`` is an integer or, for one of several chains, a
     ``SeedSequence`` spawned from the run's seed (``run_chains``)."""
-    from .render import Renderer, renderer_string
-
-    out.mkdir(parents=True, exist_ok=True)
-    fingerprints = {"model_sha256": model_fingerprint(model),
-                    "observations_sha256": observations_fingerprint(observations)}
-    if resume and (out / "run.json").exists():
-        _check_same_inputs(out, fingerprints)  # before anything is rendered
-    renderer = renderer or Renderer(model.render)
-    scorer = Scorer(model, observations, renderer)
-    if not isinstance(seed, np.random.SeedSequence):
-        seed_sequence = np.random.SeedSequence(seed)
-    else:
-        seed_sequence = seed
-    rng = np.random.default_rng(seed_sequence)
-    seed = _seed_record(seed)
-    sampler = Sampler(model, scorer, rng)
-    # The warm-up's sweeps (adaptation, annealing) never count as samples of the posterior.
-    burn_option, burn = burn, steps // 2 if burn is None else burn
-    burn = max(burn, warmup_sweeps(model.inference))
-    state = read_checkpoint(out) if resume else None
-    meta = {
-        "sppl_version": __version__,
-        "seed": seed,
-        "steps": steps,
-        "thin": thin,
-        "burn": burn_option,
-        "model": str(model.path) if model.path else None,
-        "observations": str(observations.root),
-        "gl_renderer": renderer_string(),
-        **fingerprints,
-        **(extra or {}),
-    }
-    (out / "run.json").write_text(json.dumps(meta, indent=2))
-
-    if state is not None:
-        restored = restore(sampler, state, out / CHECKPOINT)
-        trace, best, best_step = restored.trace, restored.best, restored.best_step
-        start, seconds_before = restored.step, restored.seconds
-    else:
-        trace = sampler.initial_trace()
-        if math.isnan(trace.score):
-            # Every ratio from this state would be NaN, and so rejected: the chain could not move.
-            raise RunError("the starting scene's log joint is NaN: a sensor likelihood gave NaN "
-                           "for the observations", path=observations.root,
-                           hint="check the observations and the likelihoods the model names")
-        best, best_step, start, seconds_before = trace, 0, 0, 0.0
-    # A resumed chain draws the samples after its checkpoint again; a new one starts empty.
-    truncate_samples(out / "samples.jsonl", start)
-    writer = SampleWriter(out / "samples.jsonl")
-    done, interrupted = start, False
-    t0 = time.monotonic()
-
-    def save(step: int) -> None:
-        writer.sync()  # every sample up to the checkpoint's step is on disk before it
-        seconds = seconds_before + time.monotonic() - t0
-        write_checkpoint(out, capture(sampler, trace, step, best, best_step, seconds))
-
-    if state is None:
-        save(0)  # resumable from the start, and no stale checkpoint of an earlier run left
-    last_save = time.monotonic()
-    bar = tqdm(total=steps, initial=start, disable=None if progress is None else not progress,
+    chain = ChainRun(model, observations, out, steps=steps, seed=seed, renderer=renderer,
+                     thin=thin, burn=burn, extra=extra, callback=callback, resume=resume,
+                     checkpoint_seconds=checkpoint_seconds)
+    interrupted = False
+    bar = tqdm(total=steps, initial=chain.start,
+               disable=None if progress is None else not progress,
                unit="step", dynamic_ncols=True, leave=False)
     try:
         with _StopRequest() as stop:
-            for step in range(start + 1, steps + 1):
-                trace = sampler.sweep(trace)
-                done = step
-                if trace.score > best.score:
-                    best, best_step = trace, step
-                if step % thin == 0:
-                    writer.write(step, trace)
+            for step in range(chain.start + 1, steps + 1):
+                stopping = chain.after_sweep(step, chain.sampler.sweep(chain.trace))
                 bar.update(1)
-                if callback is not None and callback(step, trace, best, sampler):
+                if stopping or stop.requested:
                     break
-                if stop.requested:
-                    break
-                if time.monotonic() - last_save >= checkpoint_seconds:
-                    save(step)
-                    last_save = time.monotonic()
+                chain.checkpoint_if_due()
                 if step % 50 == 0:
-                    bar.set_postfix(objects=trace.n_objects, log_joint=f"{trace.score:.0f}",
-                                    refresh=False)
-            interrupted = stop.requested and done < steps
-            save(done)
+                    bar.set_postfix(objects=chain.trace.n_objects,
+                                    log_joint=f"{chain.trace.score:.0f}", refresh=False)
+            interrupted = stop.requested and chain.done < steps
+            chain.save()
     except Stop:
         interrupted = True  # stopped mid-sweep: the last checkpoint stands
     finally:
         bar.close()
-        writer.close()
-    seconds = seconds_before + time.monotonic() - t0
-    best = sampler.prune(best)
-    map_sample = {"step": best_step, "score": best.score, "log_likelihood": best.log_likelihood,
-                  **best.as_dict()}
-    summary = summarise(
-        read_samples(out / "samples.jsonl"),
-        model.class_names,
-        map_sample,
-        sampler.stats.as_dict(),
-        burn=max(min(burn, done // 2), warmup_sweeps(model.inference)) if interrupted else burn,
-        extra={"steps_done": done, "seconds": seconds, "interrupted": interrupted, "seed": seed,
-               "resumed_from": start if state is not None else None},
-    )
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    (out / "summary.txt").write_text(format_summary(summary) + "\n")
-    return RunResult(summary, best, trace)
+        chain.close()
+    return chain.finish(interrupted)
+
+
+class ChainRun:
+    """One chain writing its run folder, for ``run_chain`` and for the chains that
+    ``sppl.lockstep`` advances together: the set-up (a new chain, or one resumed from its
+    checkpoint), the bookkeeping after each sweep, checkpoints, and the summary at the end.
+
+    ``scorer``, if given, is shared with other chains; otherwise the chain makes its own
+    (with ``renderer``, or a new one) once the resumed run's inputs have been checked."""
+
+    def __init__(self, model: Model, observations: Observations, out: Path, *, steps: int,
+                 seed: int | np.random.SeedSequence, scorer=None, renderer=None, thin: int = 1,
+                 burn: int | None = None, extra: dict[str, Any] | None = None, callback=None,
+                 resume: bool = False, checkpoint_seconds: float = CHECKPOINT_SECONDS) -> None:
+        from .render import Renderer, renderer_string
+
+        self.model, self.out, self.steps, self.thin = model, out, steps, thin
+        self.callback, self.checkpoint_seconds = callback, checkpoint_seconds
+        out.mkdir(parents=True, exist_ok=True)
+        fingerprints = {"model_sha256": model_fingerprint(model),
+                        "observations_sha256": observations_fingerprint(observations)}
+        if resume and (out / "run.json").exists():
+            _check_same_inputs(out, fingerprints)  # before anything is rendered
+        if scorer is None:
+            scorer = Scorer(model, observations, renderer or Renderer(model.render))
+        if not isinstance(seed, np.random.SeedSequence):
+            seed_sequence = np.random.SeedSequence(seed)
+        else:
+            seed_sequence = seed
+        rng = np.random.default_rng(seed_sequence)
+        self.seed = _seed_record(seed)
+        self.sampler = sampler = Sampler(model, scorer, rng)
+        # The warm-up's sweeps (adaptation, annealing) never count as samples of the posterior.
+        burn_option, burn = burn, steps // 2 if burn is None else burn
+        self.burn = max(burn, warmup_sweeps(model.inference))
+        self.state = state = read_checkpoint(out) if resume else None
+        meta = {
+            "sppl_version": __version__,
+            "seed": self.seed,
+            "steps": steps,
+            "thin": thin,
+            "burn": burn_option,
+            "model": str(model.path) if model.path else None,
+            "observations": str(observations.root),
+            "gl_renderer": renderer_string(),
+            **fingerprints,
+            **(extra or {}),
+        }
+        (out / "run.json").write_text(json.dumps(meta, indent=2))
+
+        if state is not None:
+            restored = restore(sampler, state, out / CHECKPOINT)
+            self.trace, self.best, self.best_step = restored.trace, restored.best, restored.best_step
+            self.start, self.seconds_before = restored.step, restored.seconds
+        else:
+            self.trace = sampler.initial_trace()
+            if math.isnan(self.trace.score):
+                # Every ratio from this state would be NaN, and so rejected: the chain could not
+                # move.
+                raise RunError("the starting scene's log joint is NaN: a sensor likelihood gave "
+                               "NaN for the observations", path=observations.root,
+                               hint="check the observations and the likelihoods the model names")
+            self.best, self.best_step, self.start, self.seconds_before = self.trace, 0, 0, 0.0
+        # A resumed chain draws the samples after its checkpoint again; a new one starts empty.
+        truncate_samples(out / "samples.jsonl", self.start)
+        self.writer = SampleWriter(out / "samples.jsonl")
+        self.done = self.start
+        self.t0 = time.monotonic()
+        if state is None:
+            self.save()  # resumable from the start, and no stale checkpoint of an earlier run left
+        self.last_save = time.monotonic()
+
+    def after_sweep(self, step: int, trace) -> bool:
+        """Take the state after sweep ``step``: the best so far, the sample. True when the
+        callback asks to stop."""
+        self.trace, self.done = trace, step
+        if trace.score > self.best.score:
+            self.best, self.best_step = trace, step
+        if step % self.thin == 0:
+            self.writer.write(step, trace)
+        return self.callback is not None and bool(
+            self.callback(step, trace, self.best, self.sampler))
+
+    def checkpoint_if_due(self) -> None:
+        if time.monotonic() - self.last_save >= self.checkpoint_seconds:
+            self.save()
+            self.last_save = time.monotonic()
+
+    def save(self) -> None:
+        """A checkpoint of the state after the last sweep taken."""
+        self.writer.sync()  # every sample up to the checkpoint's step is on disk before it
+        write_checkpoint(self.out, capture(self.sampler, self.trace, self.done, self.best,
+                                           self.best_step, self.seconds()))
+
+    def seconds(self) -> float:
+        return self.seconds_before + time.monotonic() - self.t0
+
+    def close(self) -> None:
+        self.writer.close()
+
+    def finish(self, interrupted: bool) -> RunResult:
+        """The chain's summary (``summary.json``, ``summary.txt``) of what it wrote."""
+        model, done, seconds = self.model, self.done, self.seconds()
+        best = self.sampler.prune(self.best)
+        map_sample = {"step": self.best_step, "score": best.score,
+                      "log_likelihood": best.log_likelihood, **best.as_dict()}
+        burn = self.burn
+        summary = summarise(
+            read_samples(self.out / "samples.jsonl"),
+            model.class_names,
+            map_sample,
+            self.sampler.stats.as_dict(),
+            burn=max(min(burn, done // 2), warmup_sweeps(model.inference)) if interrupted else burn,
+            extra={"steps_done": done, "seconds": seconds, "interrupted": interrupted,
+                   "seed": self.seed,
+                   "resumed_from": self.start if self.state is not None else None},
+        )
+        (self.out / "summary.json").write_text(json.dumps(summary, indent=2))
+        (self.out / "summary.txt").write_text(format_summary(summary) + "\n")
+        return RunResult(summary, best, self.trace)
 
 
 def read_run(out: Path) -> tuple[dict[str, Any], int]:
@@ -322,6 +363,7 @@ def run_chains(
     progress: bool | None = None,
     resume: bool = False,
     checkpoint_seconds: float = CHECKPOINT_SECONDS,
+    lockstep: bool = False,
 ) -> RunResult:
     """Run ``chains`` chains in parallel processes, chain i into ``out/chain_<i>/`` with the
     i-th stream of ``SeedSequence(seed).spawn(chains)``, then combine them into ``out/``'s
@@ -329,12 +371,15 @@ def run_chains(
     posterior over the pooled samples, R-hat and ESS of the label-invariant quantities).
     One chain is exactly ``run_chain`` into ``out/``. Ctrl-C or SIGTERM stop every chain
     with what it has drawn on disk, and the combined summary is still written. With
-    ``resume=True`` each chain continues from its own checkpoint (see ``run_chain``)."""
+    ``resume=True`` each chain continues from its own checkpoint (see ``run_chain``). With
+    ``lockstep=True`` the chains run in this process instead, advanced together
+    (``sppl.lockstep``), and draw the same samples."""
     import multiprocessing as mp
 
     if chains == 1:
         return run_chain(model, observations, out, steps=steps, seed=seed, thin=thin, burn=burn,
-                         progress=progress, resume=resume, checkpoint_seconds=checkpoint_seconds)
+                         progress=progress, resume=resume, checkpoint_seconds=checkpoint_seconds,
+                         extra={"lockstep": True} if lockstep else None)
     out.mkdir(parents=True, exist_ok=True)
     fingerprints = {"model_sha256": model_fingerprint(model),
                     "observations_sha256": observations_fingerprint(observations)}
@@ -352,8 +397,18 @@ def run_chains(
         "observations": str(observations.root),
         "chain_folders": [chain_folder(out, i).name for i in range(chains)],
         **fingerprints,
+        **({"lockstep": True} if lockstep else {}),
     }
     (out / "run.json").write_text(json.dumps(meta, indent=2))
+    if lockstep:
+        from .lockstep import run_lockstep
+
+        t0 = time.monotonic()
+        interrupted = run_lockstep(model, observations, out, chains=chains, steps=steps,
+                                   seed=seed, thin=thin, burn=burn, progress=progress,
+                                   resume=resume, checkpoint_seconds=checkpoint_seconds)
+        summary = combine_chains(out, seconds=time.monotonic() - t0, interrupted=interrupted)
+        return RunResult(summary, None, None)
     ctx = mp.get_context("spawn")
     done = ctx.Array("q", chains)
     errors = ctx.Queue()

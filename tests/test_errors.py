@@ -309,6 +309,10 @@ CASES = [
          a_run(done=5, model_sha256="0" * 64), "model has changed"),
     Case("resume-seed", "--resume with another --seed",
          ["sample", "--resume", "run", "--seed", "3"], a_run(done=5), "--seed 3 differs"),
+    Case("resume-lockstep", "--resume --lockstep of chains that ran in processes",
+         ["sample", "--resume", "run", "--lockstep"],
+         a_run(done=5, chains=2, chain_folders=["chain_0", "chain_1"]),
+         "leave out --lockstep"),
     # -- several chains: errors found before the chains start, and in a chain's own process --
     Case("chains-bad-obs", "a bad observation with --chains 2", [*SAMPLE, "--chains", "2"],
          with_files(depth=np.zeros((H, W), np.float32)),
