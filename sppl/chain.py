@@ -78,7 +78,7 @@ def evaluate_batch(requests) -> list[Trace | None]:
         log_prior = sampler.proposal_log_prior(proposal)
         if log_prior is None:
             continue
-        if proposal.move == "noise":
+        if proposal.move == "noise":  # the objects are the trace's: its statistics stand
             out[i] = sampler.scored(proposal, log_prior, trace.stats, trace.renders)
         else:
             pending.append((i, log_prior))
