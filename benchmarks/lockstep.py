@@ -8,8 +8,8 @@ process, from the same states: in lockstep (``sppl.lockstep.sweep_together``: ea
 evaluations of every chain in one ``Scorer.evaluate_batch`` call) and one chain after another
 (each chain's own ``Sampler.sweep``). The chains are first run --warm sweeps, so that they
 hold objects; each repeat then restarts every chain from that state and generator, so both
-ways draw the same sweeps. Figures are medians of --repeats; the two ways alternate within a
-repeat, so the ratio compares like with like on a shared machine.
+ways draw the same sweeps. Figures are medians of --repeats; the two ways run in turn within a
+repeat (in alternating order), so the ratio compares like with like on a shared machine.
 
 Then whole runs, as ``sppl sample --chains N`` makes them (start-up, checkpoints and summaries
 included): in lockstep, in N processes, and one ``run_chain`` after another, once each for
@@ -85,9 +85,10 @@ def main(argv=None) -> int:
 
     rates = {"lockstep": [], "one after another": []}
     ratios = []
-    for _ in range(args.repeats):
+    ways = [("lockstep", lockstep), ("one after another", one_after_another)]
+    for repeat in range(args.repeats):
         seconds, ends = {}, {}
-        for name, fn in (("lockstep", lockstep), ("one after another", one_after_another)):
+        for name, fn in ways if repeat % 2 == 0 else ways[::-1]:  # neither always goes first
             restart()
             t0 = time.perf_counter()
             ends[name] = [t.score for t in fn()]
