@@ -173,11 +173,6 @@ class _Pixels:
 _INCREMENTAL_AREA = 0.6
 
 
-def _total(terms: np.ndarray) -> np.ndarray:
-    """Float64 sums of the two channels of a (rows, cols, 2) block of terms."""
-    return terms.reshape(-1, 2).astype(np.float64).sum(axis=0)
-
-
 class Scorer(ReferenceScorer):
     """The fast path: per-pixel terms and their sums computed on the GL side, incrementally
     where a proposal changes a few objects. Same statistics as ``ReferenceScorer`` (to float32
@@ -255,11 +250,10 @@ class Scorer(ReferenceScorer):
         """``evaluate`` for several object sets at once, all drawn before one read-back."""
         if self.pixels is None:
             return [super().evaluate(objects) for objects in hypotheses]
-        images = self.pixels.render([self._drawn(objects) for objects in hypotheses])
-        sums = np.stack([self.pixels.sums(c, im) for c, im in enumerate(images)], axis=1)
+        images, sums = self.pixels.render([self._drawn(objects) for objects in hypotheses])
         out = []
         for b, objects in enumerate(hypotheses):
-            pixels = _Pixels(sums[b], [im[b] for im in images])
+            pixels = _Pixels(sums[b], images[b])
             out.append((self._stats(sums[b]), Renders(self, self.parts(objects), pixels)))
         return out
 
@@ -300,7 +294,7 @@ class Scorer(ReferenceScorer):
                 continue
             r0, r1, c0, c1 = rect
             old = images[c][r0:r1, c0:c1]
-            sums[c] += _total(patch) - _total(old)
+            sums[c] += self.pixels.total(patch) - self.pixels.total(old)
             kept.append((c, rect, patch))
         return _Pixels(sums, parent=before, patches=tuple(kept))
 

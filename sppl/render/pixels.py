@@ -41,8 +41,6 @@ if TYPE_CHECKING:
 INSTANCE_FLOATS = 28
 INSTANCE_FORMAT = "16f 9f 3f/i"
 MISSING = -1.0  # an observed value that marks "no term here" (observations are never negative)
-# Hypotheses drawn before one read-back, at most (``render`` takes any number).
-MAX_BATCH = 64
 
 
 def instance_rows(parts: Sequence[Part]) -> dict[str, np.ndarray]:
@@ -72,8 +70,9 @@ def instance_rows(parts: Sequence[Part]) -> dict[str, np.ndarray]:
 
 
 class _Slot:
-    """One tile's instance buffers, one per primitive, with their vertex arrays: each tile
-    has its own, so that no buffer is rewritten while a pass that reads it is pending."""
+    """One camera's instance buffers, one per primitive, with their vertex arrays: each
+    camera has its own, so that no buffer is rewritten while a pass that reads it is
+    pending."""
 
     def __init__(self) -> None:
         self.buffers: dict[str, moderngl.Buffer] = {}
@@ -123,37 +122,37 @@ class PixelScorer:
              c.depth_type == "ray", float(c.depth_max), (c.fx, c.fy, c.cx, c.cy), float(c.near))
             for c in self.cameras
         ]
-        # Summing an image's two channels is a product with a 0/1 matrix: in float64 it is
-        # exact to rounding, and far faster than numpy's strided sums.
-        self._pick = []
-        for c in self.cameras:
-            pick = np.zeros((2 * c.width * c.height, 2))
-            pick[0::2, 0] = pick[1::2, 1] = 1.0
-            self._pick.append(pick)
-        self._slots: list[_Slot] = []
-        self._targets: list[list[tuple]] = []  # [hypothesis slot][camera]
+        self._ones = np.ones(max(c.width * c.height for c in self.cameras))
+        self._slots = [_Slot() for _ in self.cameras]
+        self._targets = [self._make_target(c) for c in self.cameras]
 
     # -- drawing -------------------------------------------------------------------------------
 
-    def render(self, hypotheses: Sequence[Sequence[Drawn]]) -> list[np.ndarray]:
+    def render(self, hypotheses: Sequence[Sequence[Drawn]]):
         """Terms of whole hypotheses, each given as the ``Drawn`` of its static parts and
-        objects in order: per camera an array (len(hypotheses), height, width, 2)."""
-        out = [np.empty((len(hypotheses), c.height, c.width, 2), dtype="f4")
-               for c in self.cameras]
-        for start in range(0, len(hypotheses), MAX_BATCH):
-            batch = hypotheses[start : start + MAX_BATCH]
-            self._begin()
-            for b, drawn in enumerate(batch):
-                for c in range(len(self.cameras)):
-                    fbo = self._target(b, c)
-                    fbo.use()
-                    fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-                    self._draw(b, c, drawn, None)
-            self._end()
-            for b in range(len(batch)):
-                for c in range(len(self.cameras)):
-                    self._target(b, c).read_into(out[c][start + b], components=2, dtype="f4")
-        return out
+        objects in order: per hypothesis, a list of per-camera (height, width, 2) arrays,
+        and their float64 sums, (len(hypotheses), cameras, 2)."""
+        images, sums = [], np.empty((len(hypotheses), len(self.cameras), 2))
+        self._begin()
+        # One hypothesis at a time, read back before the next is drawn: with llvmpipe
+        # rasterising on the calling thread nothing overlaps anyway, and a batch of pending
+        # framebuffers measured slower per hypothesis than one (cache misses, and the
+        # read-back of all of them at the end).
+        for b, drawn in enumerate(hypotheses):
+            for c in range(len(self.cameras)):
+                fbo = self._target(c)
+                fbo.use()
+                fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+                self._draw(c, drawn, None)
+            terms = []
+            for c, camera in enumerate(self.cameras):
+                image = np.empty((camera.height, camera.width, 2), dtype="f4")
+                self._target(c).read_into(image, components=2, dtype="f4")
+                sums[b, c] = self.total(image)
+                terms.append(image)
+            images.append(terms)
+        self._end()
+        return images, sums
 
     def render_regions(self, drawn: Sequence[Drawn], rects: Sequence[Rect | None]):
         """Terms of one hypothesis inside one rectangle per camera (None: skip that camera);
@@ -162,11 +161,11 @@ class PixelScorer:
         self._begin()
         for c, rect in enumerate(rects):
             if rect is not None:
-                fbo = self._target(0, c)
+                fbo = self._target(c)
                 fbo.use()
                 fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=_window(rect))
                 self.ctx.scissor = _window(rect)
-                self._draw(0, c, drawn, rect)
+                self._draw(c, drawn, rect)
                 self.ctx.scissor = None
         self._end()
         out = []
@@ -175,22 +174,26 @@ class PixelScorer:
                 out.append(None)
                 continue
             patch = np.empty((rect[1] - rect[0], rect[3] - rect[2], 2), dtype="f4")
-            self._target(0, c).read_into(patch, viewport=_window(rect), components=2,
+            self._target(c).read_into(patch, viewport=_window(rect), components=2,
                                          dtype="f4")
             out.append(patch)
         return out
 
-    def sums(self, c: int, images: np.ndarray) -> np.ndarray:
-        """Float64 sums (hypotheses, 2) of camera c's terms, from ``render``'s array."""
-        flat = images.reshape(len(images), -1).astype(np.float64)
-        return flat @ self._pick[c]
+    def total(self, terms: np.ndarray) -> np.ndarray:
+        """Float64 sums of the two channels of a (rows, cols, 2) block of terms."""
+        # A product with a vector of ones, in float64: exact to rounding, and far faster
+        # than numpy's sum over the first axis of an (n, 2) array.
+        flat = terms.reshape(-1, 2).astype(np.float64)
+        n = len(flat)
+        if len(self._ones) < n:
+            self._ones = np.ones(n)
+        return self._ones[:n] @ flat
 
     def release(self) -> None:
-        for targets in self._targets:
-            for fbo, objects in targets:
-                fbo.release()
-                for obj in objects:
-                    obj.release()
+        for fbo, objects in self._targets:
+            fbo.release()
+            for obj in objects:
+                obj.release()
         for slot in self._slots:
             for obj in [*slot.vaos.values(), *slot.buffers.values()]:
                 obj.release()
@@ -211,7 +214,7 @@ class PixelScorer:
         self.ctx.front_face = "ccw"
         self.ctx.disable(moderngl.CULL_FACE)
 
-    def _draw(self, b: int, c: int, drawn: Sequence[Drawn], region: Rect | None) -> None:
+    def _draw(self, c: int, drawn: Sequence[Drawn], region: Rect | None) -> None:
         """Draw camera c's view of ``drawn`` (inside ``region``) into the bound framebuffer."""
         visible = [d for d in drawn if d.rects[c] is not None
                    and (region is None or meets(d.rects[c], region))]
@@ -233,9 +236,7 @@ class PixelScorer:
         # Back faces of closed parts are hidden behind their front faces unless the camera
         # is inside a part: the same rule as Renderer's, so the same pixels.
         cull = not any(d.inside[c] for d in visible)
-        while len(self._slots) <= b * len(self.cameras) + c:
-            self._slots.append(_Slot())
-        slot = self._slots[b * len(self.cameras) + c]
+        slot = self._slots[c]
         for primitive, chunks in rows.items():
             data = chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
             vao = self._vao(slot, primitive, data.nbytes)
@@ -269,18 +270,14 @@ class PixelScorer:
             vbo = self._meshes[primitive] = self.ctx.buffer(vertices.tobytes())
         return vbo
 
-    def _target(self, b: int, c: int) -> moderngl.Framebuffer:
-        """Hypothesis slot b's framebuffer for camera c, made once."""
-        while len(self._targets) <= b:
-            self._targets.append([])
-        targets = self._targets[b]
-        while len(targets) <= c:
-            camera = self.cameras[len(targets)]
-            size = (camera.width, camera.height)
-            terms = self.ctx.texture(size, 2, dtype="f4")
-            visibility = self.ctx.depth_renderbuffer(size)
-            targets.append((self.ctx.framebuffer([terms], visibility), (terms, visibility)))
-        return targets[c][0]
+    def _target(self, c: int) -> moderngl.Framebuffer:
+        return self._targets[c][0]
+
+    def _make_target(self, camera: Camera) -> tuple:
+        size = (camera.width, camera.height)
+        terms = self.ctx.texture(size, 2, dtype="f4")
+        visibility = self.ctx.depth_renderbuffer(size)
+        return self.ctx.framebuffer([terms], visibility), (terms, visibility)
 
 
 def _window(rect: Rect) -> tuple[int, int, int, int]:
