@@ -27,7 +27,7 @@ from .errors import ObservationError
 from .likelihoods import Likelihood, get_likelihood, gpu_statistics
 from .model import Model
 from .observations import Observations
-from .render.bounds import CameraBounds, union
+from .render.bounds import CameraBounds, meets, union
 
 log = logging.getLogger(__name__)
 
@@ -149,24 +149,52 @@ class Renders(Mapping):
 
 
 class _Pixels:
-    """The per-pixel terms of one hypothesis (per camera, as ``PixelScorer`` reads them back)
-    and their float64 sums (cameras, 2). A hypothesis scored incrementally stores only its
-    parent's record and the rectangles it re-rendered; its own arrays are made when it
+    """The per-pixel terms of one hypothesis and their float64 sums (cameras, 2). Per camera
+    the terms are a block (rect, terms), 0 outside rect, or None where all are 0 (as
+    ``PixelScorer.render`` gives them). A hypothesis scored incrementally stores only its
+    parent's record and the rectangles it re-rendered; its own blocks are made when it
     becomes a parent in turn, so a rejected proposal costs no copy."""
 
-    __slots__ = ("images", "parent", "patches", "sums")
+    __slots__ = ("blocks", "parent", "patches", "sums")
 
-    def __init__(self, sums, images=None, parent=None, patches=()) -> None:
-        self.sums, self.images, self.parent, self.patches = sums, images, parent, patches
+    def __init__(self, sums, blocks=None, parent=None, patches=()) -> None:
+        self.sums, self.blocks, self.parent, self.patches = sums, blocks, parent, patches
 
-    def materialise(self) -> list[np.ndarray]:
-        if self.images is None:
-            images = list(self.parent.materialise())
-            for c, (r0, r1, c0, c1), patch in self.patches:  # at most one per camera
-                images[c] = images[c].copy()
-                images[c][r0:r1, c0:c1] = patch
-            self.images, self.parent, self.patches = images, None, ()
-        return self.images
+    def materialise(self) -> list:
+        if self.blocks is None:
+            blocks = list(self.parent.materialise())
+            for c, rect, patch in self.patches:  # at most one per camera
+                blocks[c] = _paste(blocks[c], rect, patch)
+            self.blocks, self.parent, self.patches = blocks, None, ()
+        return self.blocks
+
+
+def _paste(block, rect, patch):
+    """A camera's block with the pixels of rect replaced by patch."""
+    if block is None:
+        return rect, patch
+    old, terms = block
+    cover = union(old, rect)
+    if cover != old:
+        grown = np.zeros((cover[1] - cover[0], cover[3] - cover[2], 2), dtype=terms.dtype)
+        grown[old[0] - cover[0] : old[1] - cover[0], old[2] - cover[2] : old[3] - cover[2]] = terms
+        old, terms = cover, grown
+    else:
+        terms = terms.copy()
+    terms[rect[0] - old[0] : rect[1] - old[0], rect[2] - old[2] : rect[3] - old[2]] = patch
+    return old, terms
+
+
+def _crop(block, rect):
+    """The terms of a camera's block inside rect, less the pixels outside the block (which
+    are 0), or None if the two do not meet."""
+    if block is None:
+        return None
+    (r0, r1, c0, c1), terms = block
+    if not meets((r0, r1, c0, c1), rect):
+        return None
+    return terms[max(rect[0], r0) - r0 : min(rect[1], r1) - r0,
+                 max(rect[2], c0) - c0 : min(rect[3], c1) - c0]
 
 
 # Past this fraction of the atlas's pixels, a full render is cheaper than regions.
@@ -250,10 +278,10 @@ class Scorer(ReferenceScorer):
         """``evaluate`` for several object sets at once, all drawn before one read-back."""
         if self.pixels is None:
             return [super().evaluate(objects) for objects in hypotheses]
-        images, sums = self.pixels.render([self._drawn(objects) for objects in hypotheses])
+        blocks, sums = self.pixels.render([self._drawn(objects) for objects in hypotheses])
         out = []
         for b, objects in enumerate(hypotheses):
-            pixels = _Pixels(sums[b], images[b])
+            pixels = _Pixels(sums[b], blocks[b])
             out.append((self._stats(sums[b]), Renders(self, self.parts(objects), pixels)))
         return out
 
@@ -285,16 +313,16 @@ class Scorer(ReferenceScorer):
             return None
         if area == 0:
             return before  # no camera sees the change
-        images = before.materialise()
+        blocks = before.materialise()
         patches = self.pixels.render_regions(self._drawn(objects), rects)
         sums = before.sums.copy()
         kept = []
+        total = self.pixels.total
         for c, (rect, patch) in enumerate(zip(rects, patches)):
             if patch is None:
                 continue
-            r0, r1, c0, c1 = rect
-            old = images[c][r0:r1, c0:c1]
-            sums[c] += self.pixels.total(patch) - self.pixels.total(old)
+            old = _crop(blocks[c], rect)
+            sums[c] += total(patch) if old is None else total(patch) - total(old)
             kept.append((c, rect, patch))
         return _Pixels(sums, parent=before, patches=tuple(kept))
 

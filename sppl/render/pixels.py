@@ -30,7 +30,7 @@ from ..camera import Camera
 from ..errors import RenderError
 from ..geometry import Part
 from ..model import RenderSettings
-from .bounds import Rect, closed, meets
+from .bounds import Rect, closed, meets, union
 from .context import gl_context
 from .renderer import FLIP_Y, RAY_CAST, VERTEX_FORMAT, _column_major, flat_vertices, programs
 
@@ -130,29 +130,36 @@ class PixelScorer:
 
     def render(self, hypotheses: Sequence[Sequence[Drawn]]):
         """Terms of whole hypotheses, each given as the ``Drawn`` of its static parts and
-        objects in order: per hypothesis, a list of per-camera (height, width, 2) arrays,
+        objects in order. Per hypothesis, a list of per-camera blocks (rect, terms): every
+        pixel outside rect is 0, since no part can reach it (None: nothing is in view);
         and their float64 sums, (len(hypotheses), cameras, 2)."""
-        images, sums = [], np.empty((len(hypotheses), len(self.cameras), 2))
+        blocks, sums = [], np.zeros((len(hypotheses), len(self.cameras), 2))
         self._begin()
         # One hypothesis at a time, read back before the next is drawn: with llvmpipe
         # rasterising on the calling thread nothing overlaps anyway, and a batch of pending
-        # framebuffers measured slower per hypothesis than one (cache misses, and the
-        # read-back of all of them at the end).
+        # framebuffers measured slower per hypothesis than one.
         for b, drawn in enumerate(hypotheses):
+            rects = []
             for c in range(len(self.cameras)):
                 fbo = self._target(c)
                 fbo.use()
                 fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-                self._draw(c, drawn, None)
+                rects.append(self._draw(c, drawn, None))
+            # Only the pixels the parts can reach are read back and kept: objects usually
+            # cover a small part of the image, and the rest is the cleared 0.
             terms = []
-            for c, camera in enumerate(self.cameras):
-                image = np.empty((camera.height, camera.width, 2), dtype="f4")
-                self._target(c).read_into(image, components=2, dtype="f4")
-                sums[b, c] = self.total(image)
-                terms.append(image)
-            images.append(terms)
+            for c, rect in enumerate(rects):
+                if rect is None:
+                    terms.append(None)
+                    continue
+                block = np.empty((rect[1] - rect[0], rect[3] - rect[2], 2), dtype="f4")
+                self._target(c).read_into(block, viewport=_window(rect), components=2,
+                                          dtype="f4")
+                sums[b, c] = self.total(block)
+                terms.append((rect, block))
+            blocks.append(terms)
         self._end()
-        return images, sums
+        return blocks, sums
 
     def render_regions(self, drawn: Sequence[Drawn], rects: Sequence[Rect | None]):
         """Terms of one hypothesis inside one rectangle per camera (None: skip that camera);
@@ -214,16 +221,22 @@ class PixelScorer:
         self.ctx.front_face = "ccw"
         self.ctx.disable(moderngl.CULL_FACE)
 
-    def _draw(self, c: int, drawn: Sequence[Drawn], region: Rect | None) -> None:
-        """Draw camera c's view of ``drawn`` (inside ``region``) into the bound framebuffer."""
-        visible = [d for d in drawn if d.rects[c] is not None
-                   and (region is None or meets(d.rects[c], region))]
-        if not visible:
-            return
+    def _draw(self, c: int, drawn: Sequence[Drawn], region: Rect | None) -> Rect | None:
+        """Draw camera c's view of ``drawn`` (inside ``region``) into the bound framebuffer;
+        the rectangle that holds every pixel drawn (None: nothing was)."""
         rows: dict[str, list[np.ndarray]] = {}
-        for d in visible:
+        cover = None
+        cull = True
+        for d in drawn:
+            rect = d.rects[c]
+            if rect is None or (region is not None and not meets(rect, region)):
+                continue
+            cover = rect if cover is None else union(cover, rect)
+            cull = cull and not d.inside[c]
             for primitive, r in d.rows.items():
                 rows.setdefault(primitive, []).append(r)
+        if cover is None:
+            return None
         values = self._camera_uniforms[c]
         # Only the programs this pass draws with get the camera's uniforms.
         for sphere in {p in RAY_CAST for p in rows}:
@@ -234,8 +247,7 @@ class PixelScorer:
                     uniform.value = value
         self.observed[c].use(location=0)
         # Back faces of closed parts are hidden behind their front faces unless the camera
-        # is inside a part: the same rule as Renderer's, so the same pixels.
-        cull = not any(d.inside[c] for d in visible)
+        # is inside a part (``cull`` above): the same rule as Renderer's, so the same pixels.
         slot = self._slots[c]
         for primitive, chunks in rows.items():
             data = chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
@@ -246,6 +258,7 @@ class PixelScorer:
             else:
                 self.ctx.disable(moderngl.CULL_FACE)
             vao.render(moderngl.TRIANGLES, instances=len(data))
+        return cover
 
     def _vao(self, slot: _Slot, primitive: str, nbytes: int) -> moderngl.VertexArray:
         buffer = slot.buffers.get(primitive)
