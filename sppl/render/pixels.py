@@ -90,17 +90,25 @@ class PixelScorer:
     def __init__(self, settings: RenderSettings, cameras: Sequence[Camera], observed) -> None:
         self.ctx = ctx = gl_context()
         self.cameras = list(cameras)
-        self._programs = programs(ctx, "terms.vert", "terms.frag")
         light = np.asarray(settings.light, dtype=float)
-        self._uniforms = {}
-        for sphere, program in self._programs.items():
-            program["light"].value = tuple(light / np.linalg.norm(light))
-            program["ambient"].value = float(settings.ambient)
-            program["background"].value = tuple(float(c) for c in settings.background)
-            program["observed"].value = 0
-            names = ("view", "projection", "ray_depth", "depth_max")
-            names += ("intrinsics", "near") if sphere else ()
-            self._uniforms[sphere] = [program[n] for n in names]
+        # Each camera has its own pair of programs, whose uniforms are set here once: writing
+        # a camera's ten uniforms before each of its passes cost more than the draws.
+        self._programs = []
+        for camera in self.cameras:
+            pair = programs(ctx, "terms.vert", "terms.frag")
+            for sphere, program in pair.items():
+                program["light"].value = tuple(light / np.linalg.norm(light))
+                program["ambient"].value = float(settings.ambient)
+                program["background"].value = tuple(float(c) for c in settings.background)
+                program["observed"].value = 0
+                program["view"].write(_column_major(camera.w2c))
+                program["projection"].write(_column_major(FLIP_Y @ camera.projection()))
+                program["ray_depth"].value = camera.depth_type == "ray"
+                program["depth_max"].value = float(camera.depth_max)
+                if sphere:
+                    program["intrinsics"].value = (camera.fx, camera.fy, camera.cx, camera.cy)
+                    program["near"].value = float(camera.near)
+            self._programs.append(pair)
         self._meshes = {}
         limit = ctx.info["GL_MAX_TEXTURE_SIZE"]
         self.observed = []
@@ -116,12 +124,6 @@ class PixelScorer:
             texture = ctx.texture((camera.width, camera.height), 4, texels.tobytes(), dtype="f4")
             texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
             self.observed.append(texture)
-        # Per camera: the uniform values of its pass, computed once.
-        self._camera_uniforms = [
-            (_column_major(c.w2c), _column_major(FLIP_Y @ c.projection()),
-             c.depth_type == "ray", float(c.depth_max), (c.fx, c.fy, c.cx, c.cy), float(c.near))
-            for c in self.cameras
-        ]
         self._ones = np.ones(max(c.width * c.height for c in self.cameras))
         self._slots = [_Slot() for _ in self.cameras]
         self._targets = [self._make_target(c) for c in self.cameras]
@@ -204,9 +206,11 @@ class PixelScorer:
         for slot in self._slots:
             for obj in [*slot.vaos.values(), *slot.buffers.values()]:
                 obj.release()
-        for obj in [*self._meshes.values(), *self.observed, *self._programs.values()]:
+        programs_ = [p for pair in self._programs for p in pair.values()]
+        for obj in [*self._meshes.values(), *self.observed, *programs_]:
             obj.release()
         self._targets, self._slots, self._meshes, self.observed = [], [], {}, []
+        self._programs = []
 
     # -- helpers -------------------------------------------------------------------------------
 
@@ -237,21 +241,13 @@ class PixelScorer:
                 rows.setdefault(primitive, []).append(r)
         if cover is None:
             return None
-        values = self._camera_uniforms[c]
-        # Only the programs this pass draws with get the camera's uniforms.
-        for sphere in {p in RAY_CAST for p in rows}:
-            for uniform, value in zip(self._uniforms[sphere], values):  # sphere's: two more
-                if isinstance(value, bytes):
-                    uniform.write(value)
-                else:
-                    uniform.value = value
         self.observed[c].use(location=0)
         # Back faces of closed parts are hidden behind their front faces unless the camera
         # is inside a part (``cull`` above): the same rule as Renderer's, so the same pixels.
         slot = self._slots[c]
         for primitive, chunks in rows.items():
             data = chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
-            vao = self._vao(slot, primitive, data.nbytes)
+            vao = self._vao(c, slot, primitive, data.nbytes)
             slot.buffers[primitive].write(data)
             if cull and closed(primitive):
                 self.ctx.enable(moderngl.CULL_FACE)
@@ -260,12 +256,12 @@ class PixelScorer:
             vao.render(moderngl.TRIANGLES, instances=len(data))
         return cover
 
-    def _vao(self, slot: _Slot, primitive: str, nbytes: int) -> moderngl.VertexArray:
+    def _vao(self, c: int, slot: _Slot, primitive: str, nbytes: int) -> moderngl.VertexArray:
         buffer = slot.buffers.get(primitive)
         if buffer is None:
             buffer = slot.buffers[primitive] = self.ctx.buffer(reserve=max(nbytes, 1024))
             sphere = primitive in RAY_CAST
-            slot.vaos[primitive] = self.ctx.vertex_array(self._programs[sphere], [
+            slot.vaos[primitive] = self.ctx.vertex_array(self._programs[c][sphere], [
                 (self._mesh(primitive), *VERTEX_FORMAT[sphere]),
                 (buffer, INSTANCE_FORMAT, "i_model", "i_normal", "i_colour"),
             ])
