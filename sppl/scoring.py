@@ -129,13 +129,13 @@ class Renders(Mapping):
     fast path's record of the hypothesis's per-pixel terms, for incremental scoring.
     """
 
-    def __init__(self, scorer: ReferenceScorer, parts, pixels: _Pixels | None = None) -> None:
-        self.scorer, self.parts, self.pixels = scorer, parts, pixels
+    def __init__(self, scorer: ReferenceScorer, objects, pixels: _Pixels | None = None) -> None:
+        self.scorer, self.objects, self.pixels = scorer, objects, pixels
         self._renders: dict | None = None
 
     def _all(self) -> dict:
         if self._renders is None:
-            self._renders = ReferenceScorer.render(self.scorer, self.parts)
+            self._renders = ReferenceScorer.render(self.scorer, self.scorer.parts(self.objects))
         return self._renders
 
     def __getitem__(self, frame):
@@ -238,6 +238,11 @@ class Scorer(ReferenceScorer):
                 self._constant[(t.frame, t.kind)] = (int(valid.sum()), float(np.sum(r * r)))
         self._slot = {(t.frame, t.kind): (index[t.frame], 0 if t.kind == "image" else 1)
                       for t in self.terms}
+        self._keys = list(self._slot)
+        self._cams = np.array([self._slot[k][0] for k in self._keys], dtype=int)
+        self._kinds = np.array([self._slot[k][1] for k in self._keys], dtype=int)
+        self._counts = np.array([[self._constant[k][0], 0.0] for k in self._keys])
+        self._empty = np.array([self._constant[k][1] for k in self._keys])
         self.pixels = PixelScorer(renderer.settings, [self.cameras[f] for f in self.frames],
                                   [observed[f] for f in self.frames])
         self.draws = DrawCache([CameraBounds(self.cameras[f]) for f in self.frames])
@@ -271,7 +276,7 @@ class Scorer(ReferenceScorer):
         if isinstance(before, Renders) and before.scorer is self and before.pixels is not None:
             pixels = self._incremental(parent.objects, objects, before.pixels)
             if pixels is not None:
-                return self._stats(pixels.sums), Renders(self, self.parts(objects), pixels)
+                return self._stats(pixels.sums), Renders(self, objects, pixels)
         return None
 
     def evaluate_many(self, hypotheses):
@@ -282,7 +287,7 @@ class Scorer(ReferenceScorer):
         out = []
         for b, objects in enumerate(hypotheses):
             pixels = _Pixels(sums[b], blocks[b])
-            out.append((self._stats(sums[b]), Renders(self, self.parts(objects), pixels)))
+            out.append((self._stats(sums[b]), Renders(self, objects, pixels)))
         return out
 
     # -- helpers -------------------------------------------------------------------------------
@@ -291,23 +296,28 @@ class Scorer(ReferenceScorer):
         return [*self._static, *(self.draws.of_object(o) for o in objects)]
 
     def _stats(self, sums: np.ndarray) -> dict[tuple[int, str], np.ndarray]:
-        stats = {}
-        for key, (c, k) in self._slot.items():
-            n, empty = self._constant[key]
-            stats[key] = np.array([n, max(empty + float(sums[c, k]), 0.0)])
-        return stats
+        # One array for all the terms, each term's statistics a row of it.
+        out = self._counts.copy()
+        np.maximum(self._empty + sums[self._cams, self._kinds], 0.0, out=out[:, 1])
+        return dict(zip(self._keys, out))
 
     def _incremental(self, old_objects, objects, before: _Pixels) -> _Pixels | None:
         """The new hypothesis's record from its parent's, re-rendering only the rectangles
         the changed objects cover before or after; None when a full render is cheaper."""
-        old_ids, new_ids = {id(o) for o in old_objects}, {id(o) for o in objects}
-        changed = [o for o in old_objects if id(o) not in new_ids]
-        changed += [o for o in objects if id(o) not in old_ids]
+        if len(old_objects) == len(objects):
+            # The usual move changes objects in place: those that differ, at either end.
+            changed = [o for pair in zip(old_objects, objects) if pair[0] is not pair[1]
+                       for o in pair]
+        else:
+            old_ids, new_ids = {id(o) for o in old_objects}, {id(o) for o in objects}
+            changed = [o for o in old_objects if id(o) not in new_ids]
+            changed += [o for o in objects if id(o) not in old_ids]
         if not changed:
             return before
-        rects = [None] * len(self.frames)
-        for o in changed:
-            rects = [union(r, s) for r, s in zip(rects, self.draws.of_object(o).rects)]
+        of_object = self.draws.of_object
+        rects = of_object(changed[0]).rects
+        for o in changed[1:]:
+            rects = [union(r, s) for r, s in zip(rects, of_object(o).rects)]
         area = sum((r[1] - r[0]) * (r[3] - r[2]) for r in rects if r is not None)
         if area > _INCREMENTAL_AREA * self._area:
             return None
