@@ -327,12 +327,11 @@ class Scorer(ReferenceScorer):
         patches = self.pixels.render_regions(self._drawn(objects), rects)
         sums = before.sums.copy()
         kept = []
-        total = self.pixels.total
+        change = self.pixels.change
         for c, (rect, patch) in enumerate(zip(rects, patches)):
             if patch is None:
                 continue
-            old = _crop(blocks[c], rect)
-            sums[c] += total(patch) if old is None else total(patch) - total(old)
+            sums[c] += change(patch, _crop(blocks[c], rect))
             kept.append((c, rect, patch))
         return _Pixels(sums, parent=before, patches=tuple(kept))
 

@@ -188,6 +188,16 @@ class PixelScorer:
             out.append(patch)
         return out
 
+    def change(self, new: np.ndarray, old: np.ndarray | None) -> np.ndarray:
+        """Float64 sums of new's terms less old's (None: no terms)."""
+        if old is None:
+            return self.total(new)
+        if old.shape != new.shape:
+            return self.total(new) - self.total(old)
+        # One difference of the blocks in float64 (exact: both are float32) and one sum.
+        flat = np.subtract(new, old, dtype=np.float64).reshape(-1, 2)
+        return self._ones[: len(flat)] @ flat
+
     def total(self, terms: np.ndarray) -> np.ndarray:
         """Float64 sums of the two channels of a (rows, cols, 2) block of terms."""
         # A product with a vector of ones, in float64: exact to rounding, and far faster
