@@ -168,23 +168,23 @@ class PixelScorer:
         a list of (rows, cols, 2) arrays, or None for the cameras skipped. Only what meets a
         rectangle is drawn there."""
         self._begin()
-        for c, rect in enumerate(rects):
+        windows = [None if rect is None else _window(rect) for rect in rects]
+        for c, (rect, window) in enumerate(zip(rects, windows)):
             if rect is not None:
-                fbo = self._target(c)
+                fbo = self._targets[c][0]
                 fbo.use()
-                fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=_window(rect))
-                self.ctx.scissor = _window(rect)
+                fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=window)
+                self.ctx.scissor = window
                 self._draw(c, drawn, rect)
                 self.ctx.scissor = None
         self._end()
         out = []
-        for c, rect in enumerate(rects):
+        for c, (rect, window) in enumerate(zip(rects, windows)):
             if rect is None:
                 out.append(None)
                 continue
-            patch = np.empty((rect[1] - rect[0], rect[3] - rect[2], 2), dtype="f4")
-            self._target(c).read_into(patch, viewport=_window(rect), components=2,
-                                         dtype="f4")
+            patch = np.empty((window[3], window[2], 2), dtype="f4")
+            self._targets[c][0].read_into(patch, viewport=window, components=2, dtype="f4")
             out.append(patch)
         return out
 
