@@ -280,7 +280,7 @@ class Scorer(ReferenceScorer):
         return None
 
     def evaluate_many(self, hypotheses):
-        """``evaluate`` for several object sets at once, all drawn before one read-back."""
+        """``evaluate`` for several object sets, whole (no parent)."""
         if self.pixels is None:
             return [super().evaluate(objects) for objects in hypotheses]
         blocks, sums = self.pixels.render([self._drawn(objects) for objects in hypotheses])

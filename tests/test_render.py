@@ -379,3 +379,37 @@ def test_context_failure_names_the_packages_to_install(monkeypatch):
     message = str(caught.value)
     assert "found 0 devices" in message
     assert "libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri" in message
+
+
+_THREADS = """
+import os
+from sppl.render.context import gl_context, renderer_string
+gl_context()
+names = [open(f"/proc/self/task/{t}/comm").read() for t in os.listdir("/proc/self/task")]
+print(renderer_string().startswith("llvmpipe"), os.environ.get("LP_NUM_THREADS"),
+      sum(n.startswith("llvmpipe") for n in names))
+"""
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="needs Linux's /proc")
+@pytest.mark.parametrize("given", [None, "2"])
+def test_llvmpipe_rasterises_on_the_calling_thread_unless_told(require_gl, given):
+    """sppl's context gets no llvmpipe rasteriser threads by default, the environment keeps no
+    trace of that default, and a value the user gives wins."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import sppl
+
+    env = {k: v for k, v in os.environ.items() if k != "LP_NUM_THREADS"}
+    env["PYTHONPATH"] = os.pathsep.join(  # this checkout's sppl, whatever is installed
+        [str(Path(sppl.__file__).resolve().parent.parent), env.get("PYTHONPATH", "")])
+    if given is not None:
+        env["LP_NUM_THREADS"] = given
+    out = subprocess.run([sys.executable, "-c", _THREADS], env=env, capture_output=True,
+                         text=True, check=True).stdout.split()
+    if out[0] != "True":
+        pytest.skip("the GL driver is not llvmpipe")
+    assert out[1] == str(given)
+    assert int(out[2]) == (0 if given is None else int(given))

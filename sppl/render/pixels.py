@@ -3,15 +3,17 @@
 The fast path of ``sppl.scoring``. Each camera's observation is uploaded once as an RGBA float
 texture (RGB, and depth in alpha); a hypothesis is drawn with a fragment shader that writes
 each pixel's squared-residual terms instead of its colour (``shaders/terms.frag``), every part
-of a primitive in one instanced draw. The read-back is two floats a pixel and the CPU only sums
-them, in float64, so that float32 on the GPU costs nothing in accuracy. Several hypotheses are
-drawn before anything is read back, so the rasteriser works on one while the next is set up.
+of a primitive in one instanced draw. The read-back is two floats a pixel, inside the rectangle
+the drawn parts can reach only (every term outside it is 0), and the CPU only sums them, in
+float64, so that float32 on the GPU costs nothing in accuracy. Each camera has its own programs,
+whose uniforms are set once.
 
 Every camera draws into its own framebuffer with the viewport at the origin, exactly as
 ``Renderer`` does: an offset viewport (tiles of one big framebuffer) changes the rounding of
 window coordinates, and thin triangles then cover different pixels. With the same arithmetic
 and the same culling the terms are those of the reference path's read-back images, pixel for
-pixel (the tests hold the two to 1e-4).
+pixel (the tests hold the two to 1e-4). Drawing the cameras of one size as the layers of one
+framebuffer keeps that rounding, but measured slower on llvmpipe (``docs/scoring.md``).
 
 Rendering a region only (a scissor rectangle per camera) is what incremental scoring uses: the
 pixels there come out exactly as in a full render, since everything that can reach them is
