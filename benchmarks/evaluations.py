@@ -8,7 +8,7 @@ Scenes are the cubes, cones and spheres of models/shapes.scn on a grid, seen by 
 circle, every camera recording RGB and depth (Gaussian likelihood over every pixel). Paths:
 - reference: render each camera, read colour and depth back, score in numpy (ReferenceScorer);
 - fast: sppl's Scorer, per-pixel terms on the GL side, one whole hypothesis per call;
-- batch: the same, 16 hypotheses drawn before one read-back (Scorer.evaluate_many);
+- batch: the same, 16 hypotheses in one call (Scorer.evaluate_many);
 - panda3d: the thesis's renderer, Panda3D offscreen through EGL, colour and depth read back
   and scored in numpy (skipped with a message when panda3d cannot be imported);
 - incremental: a single-object parameter move scored from the current state
