@@ -18,15 +18,13 @@ import signal
 
 import numpy as np
 import pytest
-from test_cli import CAMERAS, SCENE
+from test_resume import small_observations
 
 import sppl.lockstep
 from sppl.chain import Sampler
 from sppl.checkpoint import CHECKPOINT
 from sppl.cli import main
-from sppl.lang import load_model
 from sppl.lockstep import sweep_together
-from sppl.observations import load_observations
 from sppl.render import Renderer
 from sppl.run import chain_folder, run_chain, run_chains
 from sppl.samples import read_samples
@@ -40,13 +38,7 @@ CHAINS = 3
 @pytest.fixture(scope="module")
 def setup(tmp_path_factory, root, require_gl):
     d = tmp_path_factory.mktemp("lockstep")
-    cameras = {**CAMERAS, "w": 24, "h": 24, "fl_x": 27.0, "fl_y": 27.0, "cx": 12.0, "cy": 12.0}
-    (d / "cameras.json").write_text(json.dumps(cameras))
-    (d / "scene.json").write_text(json.dumps(SCENE))
-    model_path = root / "models" / "shapes.scn"
-    assert main(["simulate", str(model_path), "--cameras", str(d / "cameras.json"),
-                 "--scene", str(d / "scene.json"), "--out", str(d / "obs"), "--seed", "1"]) == 0
-    return load_model(model_path), load_observations(d / "obs"), d
+    return (*small_observations(d, root), d)
 
 
 def one_by_one(model, obs, out, steps=2 * STEPS):

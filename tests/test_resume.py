@@ -30,16 +30,22 @@ STEPS = 16  # N; the reference run draws 2N
 SEED = 5
 
 
-@pytest.fixture(scope="module")
-def setup(tmp_path_factory, root, require_gl):
-    d = tmp_path_factory.mktemp("resume")
+def small_observations(d, root):
+    """The shipped model and observations of its test scene by 24x24 cameras, simulated into
+    ``d``: small enough for runs that are repeated and compared."""
     cameras = {**CAMERAS, "w": 24, "h": 24, "fl_x": 27.0, "fl_y": 27.0, "cx": 12.0, "cy": 12.0}
     (d / "cameras.json").write_text(json.dumps(cameras))
     (d / "scene.json").write_text(json.dumps(SCENE))
     model_path = root / "models" / "shapes.scn"
     assert main(["simulate", str(model_path), "--cameras", str(d / "cameras.json"),
                  "--scene", str(d / "scene.json"), "--out", str(d / "obs"), "--seed", "1"]) == 0
-    model, obs = load_model(model_path), load_observations(d / "obs")
+    return load_model(model_path), load_observations(d / "obs")
+
+
+@pytest.fixture(scope="module")
+def setup(tmp_path_factory, root, require_gl):
+    d = tmp_path_factory.mktemp("resume")
+    model, obs = small_observations(d, root)
     reference = d / "reference"
     run_chain(model, obs, reference, steps=2 * STEPS, seed=SEED, progress=False)
     return model, obs, d, read_samples(reference / "samples.jsonl")
