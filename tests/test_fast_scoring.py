@@ -246,3 +246,23 @@ def test_a_record_built_from_patches_is_the_full_render(setting):
         camera = fast.cameras[frame]
         np.testing.assert_array_equal(_dense(record.materialise()[c], camera),
                                       _dense(renders.pixels.blocks[c], camera))
+
+
+def test_scorers_and_the_renderer_taking_turns_on_the_context_keep_their_state(require_gl,
+                                                                                root):
+    """Two fast scorers of different observations and the reference renderer share the one
+    GL context: each sets its state (capabilities, winding, scissor, bound observation
+    textures) only when another has drawn since, and every answer stays the reference's."""
+    settings = [_setting(root, "shapes.scn", seed) for seed in (0, 1)]
+    scorers = [(Scorer(m, o, r), ReferenceScorer(m, o, r), t, n) for m, r, o, t, n in settings]
+    rng = np.random.default_rng(8)
+    model = settings[0][0]
+    traces = [Sampler(model, fast, np.random.default_rng(9)).make_trace(truth, noise)
+              for fast, _, truth, noise in scorers]
+    for i in range(24):
+        which = int(rng.integers(2))
+        fast, ref, _, noise = scorers[which]
+        trace = traces[which]
+        objects = sample_objects(model, rng) if i % 3 == 0 else trace.objects[1:]
+        stats, _ = fast.evaluate(objects, parent=trace if i % 3 else None)
+        _assert_agree(stats, ref.statistics(objects), ref, noise)  # the renderer's turn

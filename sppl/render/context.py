@@ -29,6 +29,7 @@ LLVMPIPE_THREADS = "0"
 
 _context: moderngl.Context | None = None
 _lock = threading.Lock()
+_state_owner: object | None = None
 
 
 def gl_context() -> moderngl.Context:
@@ -38,6 +39,17 @@ def gl_context() -> moderngl.Context:
         if _context is None:
             _context = _create()
         return _context
+
+
+def claim_state(owner) -> bool:
+    """Record that ``owner`` sets the shared context's state (capabilities, face winding,
+    bound textures) from now on; True when another user has set it since ``owner`` last did,
+    and ``owner`` must then set all it relies on. Every user of the context claims it before
+    it draws, so that a user that draws many times in a row sets its state only once."""
+    global _state_owner
+    changed = _state_owner is not owner
+    _state_owner = owner
+    return changed
 
 
 def renderer_string() -> str:

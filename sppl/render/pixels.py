@@ -32,8 +32,8 @@ from ..camera import Camera
 from ..errors import RenderError
 from ..geometry import Part
 from ..model import RenderSettings
-from .bounds import Rect, closed, meets, union
-from .context import gl_context
+from .bounds import Rect, closed, union
+from .context import claim_state, gl_context
 from .renderer import FLIP_Y, RAY_CAST, VERTEX_FORMAT, _column_major, flat_vertices, programs
 
 if TYPE_CHECKING:
@@ -95,14 +95,20 @@ class PixelScorer:
         light = np.asarray(settings.light, dtype=float)
         # Each camera has its own pair of programs, whose uniforms are set here once: writing
         # a camera's ten uniforms before each of its passes cost more than the draws.
+        # Each camera's observation stays bound to a texture unit of its own (while there
+        # are units enough), so that a pass need not bind it.
+        units = min(len(self.cameras), ctx.info["GL_MAX_TEXTURE_IMAGE_UNITS"])
+        self._unit = [c % units for c in range(len(self.cameras))]
+        self._bound: list[int | None] = [None] * units  # which camera's texture each unit holds
+        self._culling = False
         self._programs = []
-        for camera in self.cameras:
+        for c, camera in enumerate(self.cameras):
             pair = programs(ctx, "terms.vert", "terms.frag")
             for sphere, program in pair.items():
                 program["light"].value = tuple(light / np.linalg.norm(light))
                 program["ambient"].value = float(settings.ambient)
                 program["background"].value = tuple(float(c) for c in settings.background)
-                program["observed"].value = 0
+                program["observed"].value = self._unit[c]
                 program["view"].write(_column_major(camera.w2c))
                 program["projection"].write(_column_major(FLIP_Y @ camera.projection()))
                 program["ray_depth"].value = camera.depth_type == "ray"
@@ -129,6 +135,7 @@ class PixelScorer:
         self._ones = np.ones(max(c.width * c.height for c in self.cameras))
         self._slots = [_Slot() for _ in self.cameras]
         self._targets = [self._make_target(c) for c in self.cameras]
+        self._fbos = [fbo for fbo, _ in self._targets]
 
     # -- drawing -------------------------------------------------------------------------------
 
@@ -146,8 +153,9 @@ class PixelScorer:
             rects = []
             for c in range(len(self.cameras)):
                 fbo = self._target(c)
+                fbo.scissor = None  # a framebuffer keeps its scissor, and use() applies it
                 fbo.use()
-                fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+                fbo.clear(0.0, 0.0, 0.0, 0.0, 1.0)
                 rects.append(self._draw(c, drawn, None))
             # Only the pixels the parts can reach are read back and kept: objects usually
             # cover a small part of the image, and the rest is the cleared 0.
@@ -162,7 +170,7 @@ class PixelScorer:
                 sums[b, c] = self.total(block)
                 terms.append((rect, block))
             blocks.append(terms)
-        self._end()
+        self.ctx.scissor = None  # left on, the scissor test would restrict others' clears
         return blocks, sums
 
     def render_regions(self, drawn: Sequence[Drawn], rects: Sequence[Rect | None]):
@@ -170,23 +178,26 @@ class PixelScorer:
         a list of (rows, cols, 2) arrays, or None for the cameras skipped. Only what meets a
         rectangle is drawn there."""
         self._begin()
-        windows = [None if rect is None else _window(rect) for rect in rects]
-        for c, (rect, window) in enumerate(zip(rects, windows)):
-            if rect is not None:
-                fbo = self._targets[c][0]
-                fbo.use()
-                fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=window)
-                self.ctx.scissor = window
-                self._draw(c, drawn, rect)
-                self.ctx.scissor = None
-        self._end()
-        out = []
-        for c, (rect, window) in enumerate(zip(rects, windows)):
+        windows = []
+        for c, rect in enumerate(rects):
             if rect is None:
+                windows.append(None)
+                continue
+            window = (rect[2], rect[0], rect[3] - rect[2], rect[1] - rect[0])  # _window(rect)
+            fbo = self._fbos[c]
+            fbo.scissor = window  # for the clear and the draws: use() applies it
+            fbo.use()
+            fbo.clear(0.0, 0.0, 0.0, 0.0, 1.0)
+            self._draw(c, drawn, rect)
+            windows.append(window)
+        self.ctx.scissor = None  # left on, the scissor test would restrict others' clears
+        out = []
+        for c, window in enumerate(windows):
+            if window is None:
                 out.append(None)
                 continue
             patch = np.empty((window[3], window[2], 2), dtype="f4")
-            self._targets[c][0].read_into(patch, viewport=window, components=2, dtype="f4")
+            self._fbos[c].read_into(patch, window, 2, dtype="f4")
             out.append(patch)
         return out
 
@@ -227,15 +238,14 @@ class PixelScorer:
     # -- helpers -------------------------------------------------------------------------------
 
     def _begin(self) -> None:
-        # The context is shared with ``Renderer``; set every state this pass needs.
-        self.ctx.enable_only(moderngl.DEPTH_TEST)
-        self.ctx.scissor = None
-        # The projection's y flip makes front faces clockwise on the screen.
-        self.ctx.front_face = "cw"
-
-    def _end(self) -> None:
-        self.ctx.front_face = "ccw"
-        self.ctx.disable(moderngl.CULL_FACE)
+        # The context is shared with ``Renderer`` and other scorers: set every state these
+        # passes need when another has set its own since.
+        if claim_state(self):
+            self.ctx.enable_only(moderngl.DEPTH_TEST)
+            self._culling = False
+            # The projection's y flip makes front faces clockwise on the screen.
+            self.ctx.front_face = "cw"
+            self._bound = [None] * len(self._bound)
 
     def _draw(self, c: int, drawn: Sequence[Drawn], region: Rect | None) -> Rect | None:
         """Draw camera c's view of ``drawn`` (inside ``region``) into the bound framebuffer;
@@ -245,28 +255,42 @@ class PixelScorer:
         cull = True
         for d in drawn:
             rect = d.rects[c]
-            if rect is None or (region is not None and not meets(rect, region)):
+            if rect is None:
                 continue
-            cover = rect if cover is None else union(cover, rect)
-            cull = cull and not d.inside[c]
+            if region is None:
+                cover = rect if cover is None else union(cover, rect)
+            elif not (rect[0] < region[1] and region[0] < rect[1] and rect[2] < region[3]
+                      and region[2] < rect[3]):  # meets(rect, region), inlined: a hot loop
+                continue
+            if d.inside[c]:
+                cull = False
             for primitive, r in d.rows.items():
-                rows.setdefault(primitive, []).append(r)
-        if cover is None:
+                chunks = rows.get(primitive)
+                if chunks is None:
+                    rows[primitive] = [r]
+                else:
+                    chunks.append(r)
+        if not rows:
             return None
-        self.observed[c].use(location=0)
+        unit = self._unit[c]
+        if self._bound[unit] != c:
+            self.observed[c].use(location=unit)
+            self._bound[unit] = c
         # Back faces of closed parts are hidden behind their front faces unless the camera
         # is inside a part (``cull`` above): the same rule as Renderer's, so the same pixels.
         slot = self._slots[c]
         for primitive, chunks in rows.items():
             data = chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
-            vao = self._vao(c, slot, primitive, data.nbytes)
+            vao = slot.vaos.get(primitive)
+            if vao is None or slot.buffers[primitive].size < data.nbytes:
+                vao = self._vao(c, slot, primitive, data.nbytes)
             slot.buffers[primitive].write(data)
-            if cull and closed(primitive):
-                self.ctx.enable(moderngl.CULL_FACE)
-            else:
-                self.ctx.disable(moderngl.CULL_FACE)
+            culling = cull and closed(primitive)
+            if culling != self._culling:
+                (self.ctx.enable if culling else self.ctx.disable)(moderngl.CULL_FACE)
+                self._culling = culling
             vao.render(moderngl.TRIANGLES, instances=len(data))
-        return cover
+        return cover if region is None else region
 
     def _vao(self, c: int, slot: _Slot, primitive: str, nbytes: int) -> moderngl.VertexArray:
         buffer = slot.buffers.get(primitive)

@@ -26,7 +26,7 @@ from ..errors import RenderError
 from ..geometry import MESH_PREFIX, PRIMITIVES, Part, unit_mesh
 from ..model import RenderSettings
 from .bounds import closed, contains
-from .context import gl_context
+from .context import claim_state, gl_context
 
 # GL's window origin is the bottom-left corner and images' is the top-left: flipping y in clip
 # space makes GL's first row the image's top row, so the read-back is already in image order.
@@ -145,13 +145,16 @@ class Renderer:
         if self.program is None:
             raise RenderError("this renderer has been released")
         target = self._target(camera.width, camera.height)
+        # The context is shared with other users in the process; set every state this pass
+        # needs, the scissor test first (left on, it would restrict the clears).
+        claim_state(self)
+        self.ctx.scissor = None
+        self.ctx.enable_only(moderngl.DEPTH_TEST)
         background = tuple(float(c) for c in self.settings.background)
         target.clear_colour.clear(*background, 1.0, depth=1.0)
         target.clear_depth.clear(float(camera.depth_max))
 
         target.scene.use()
-        # The context is shared with other users in the process; set every state this pass needs.
-        self.ctx.enable_only(moderngl.DEPTH_TEST)
         view = _column_major(camera.w2c)
         projection = _column_major(FLIP_Y @ camera.projection())
         for sphere, program in self._programs.items():
