@@ -127,10 +127,14 @@ def _outline(primitive: str) -> np.ndarray:
     return np.concatenate(pts)
 
 
+def ground_points(parts: tuple[Part, ...] | list[Part]) -> np.ndarray:
+    """(N, 2) points on the ground whose convex hull is the parts' footprint."""
+    return np.concatenate([(_outline(p.primitive) @ p.matrix.T)[:, :2] for p in parts])
+
+
 def footprint_of(parts: tuple[Part, ...] | list[Part]) -> np.ndarray:
     """The convex ground-plane footprint of some parts: an (M, 2) counter-clockwise polygon."""
-    pts = np.concatenate([(_outline(p.primitive) @ p.matrix.T)[:, :2] for p in parts])
-    hull = shapely.convex_hull(shapely.MultiPoint(pts))
+    hull = shapely.convex_hull(shapely.MultiPoint(ground_points(parts)))
     return np.asarray(shapely.get_coordinates(hull.exterior if hasattr(hull, "exterior") else hull))
 
 

@@ -10,7 +10,7 @@ sensor's likelihood with the priors on its noise parameters.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Collection, Mapping
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -142,10 +142,12 @@ class ObjectClass:
     def parts(self, values: Values) -> tuple[Part, ...]:
         return tuple(self.build(values))
 
-    def footprint(self, values: Values) -> np.ndarray:
+    def footprint(self, values: Values, parts: Sequence[Part] | None = None) -> np.ndarray:
+        """The footprint polygon, an (M, 2) array; ``parts``, if given, are ``values``'
+        parts (which the derived footprint is made from)."""
         if self.footprint_fn is not None:
             return np.asarray(self.footprint_fn(values), dtype=float)
-        return footprint_of(self.parts(values))
+        return footprint_of(self.parts(values) if parts is None else parts)
 
 
 @dataclass(frozen=True)

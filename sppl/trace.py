@@ -20,12 +20,13 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
 import shapely
 
-from .geometry import Part, footprints_overlap
+from .geometry import Part, footprints_overlap, ground_points
 from .model import Model, ObjectClass
 
 Address = tuple
@@ -45,7 +46,28 @@ class SceneObject:
     values: Mapping[str, Any]
     log_prior: float  # log lambda_c + log p_c(phi)
     parts: tuple[Part, ...] = field(repr=False)
-    footprint: shapely.Polygon | None = field(repr=False, default=None)
+    # Whether the no-overlap constraint applies to this object (it has a footprint).
+    constrained: bool = field(repr=False, default=False)
+
+    # The footprint is made only when a check needs it: a chain proposes thousands of objects,
+    # most of them far from every other, and the bounding box tells those apart first.
+    @cached_property
+    def footprint(self) -> shapely.Polygon | None:
+        if not self.constrained:
+            return None
+        return shapely.Polygon(self.cls.footprint(self.values, self.parts))
+
+    @cached_property
+    def extent(self) -> tuple[float, float, float, float] | None:
+        """(x0, y0, x1, y1): the footprint's bounding box on the ground."""
+        if not self.constrained:
+            return None
+        if self.cls.footprint_fn is not None:
+            points = self.cls.footprint(self.values)
+        else:
+            points = ground_points(self.parts)
+        (x0, y0), (x1, y1) = points.min(axis=0), points.max(axis=0)
+        return float(x0), float(y0), float(x1), float(y1)
 
     def as_dict(self) -> dict[str, Any]:
         return {"class": self.cls.name, "params": {k: _plain(v) for k, v in self.values.items()}}
@@ -63,17 +85,23 @@ def make_object(model: Model, cls: ObjectClass, values: Mapping[str, Any]) -> Sc
     parts = cls.parts(values)
     # A floating object has no footprint on the ground, so the constraint leaves it out.
     constrained = model.no_overlap and not cls.floating
-    footprint = shapely.Polygon(cls.footprint(values)) if constrained else None
-    return SceneObject(cls, values, log_prior, parts, footprint)
+    return SceneObject(cls, values, log_prior, parts, constrained)
 
 
 def overlaps_any(obj: SceneObject, others) -> bool:
-    if obj.footprint is None:
+    if not obj.constrained:
         return False
-    return any(
-        o is not obj and o.footprint is not None and footprints_overlap(obj.footprint, o.footprint)
-        for o in others
-    )
+    a = obj.extent
+    for o in others:
+        if o is obj or not o.constrained:
+            continue
+        b = o.extent
+        # Footprints lie inside their boxes: boxes that share no area keep them apart.
+        if a[0] >= b[2] or b[0] >= a[2] or a[1] >= b[3] or b[1] >= a[3]:
+            continue
+        if footprints_overlap(obj.footprint, o.footprint):
+            return True
+    return False
 
 
 def counts_allowed(model: Model, objects) -> bool:

@@ -56,8 +56,11 @@ class CameraBounds:
         """The rectangle that can contain every pixel these parts shade, or None if none."""
         if not parts:
             return None
-        points = np.hstack([self.pixels_from_world @ (p.matrix @ unit_corners(p.primitive))
-                            for p in parts])
+        return self.rect_of(world_corners(parts))
+
+    def rect_of(self, corners: np.ndarray) -> Rect | None:
+        """``rect`` of the parts whose ``world_corners`` these are."""
+        points = self.pixels_from_world @ corners
         w = points[2]
         if np.any(w <= self.near) or not np.all(np.isfinite(points)):
             return self.full
@@ -69,6 +72,21 @@ class CameraBounds:
         if c0 >= c1 or r0 >= r1:
             return None
         return (r0, r1, c0, c1)
+
+
+def near_box(world: np.ndarray, point: np.ndarray, margin: float) -> bool:
+    """False when ``point`` is surely outside the box whose world corners (3, 8) are given,
+    widened by ``margin`` along each of its axes: that lies within the world box of its
+    corners widened by 3 margin (an axis moves a coordinate by at most margin, even under
+    shear). A camera is usually far outside, and then no solve is needed."""
+    reach = 3.0 * margin
+    return not (np.any(point < world.min(axis=1) - reach)
+                or np.any(point > world.max(axis=1) + reach))
+
+
+def world_corners(parts) -> np.ndarray:
+    """The corners of every part's posed bounding box, (4, 8 * len(parts)), homogeneous."""
+    return np.hstack([p.matrix @ unit_corners(p.primitive) for p in parts])
 
 
 def meets(a: Rect, b: Rect) -> bool:
@@ -89,10 +107,15 @@ def closed(primitive: str) -> bool:
     return not primitive.startswith(MESH_PREFIX)
 
 
-def contains(part: Part, point: np.ndarray, margin: float = 0.05) -> bool:
+INSIDE_MARGIN = 0.05  # metres: how near a part's box a camera may see inside it
+
+
+def contains(part: Part, point: np.ndarray, margin: float = INSIDE_MARGIN) -> bool:
     """Whether ``point`` may be inside the part (its bounding box, widened by ``margin``
     metres): a camera there can see the part's back faces, or have the near plane cut it."""
     corners = unit_corners(part.primitive)
+    if not near_box(part.matrix[:3] @ corners, point, margin):
+        return False
     lo, hi = corners[:3].min(axis=1), corners[:3].max(axis=1)
     try:
         local = np.linalg.solve(part.matrix, np.append(point, 1.0))[:3]
