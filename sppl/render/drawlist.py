@@ -33,10 +33,9 @@ class DrawCache:
     def __init__(self, bounds: Sequence[CameraBounds]) -> None:
         self.bounds = list(bounds)
         # Every camera's projection stacked, so that an object's corners go into all cameras
-        # in one product, and every camera's rectangle is found in one pass over them.
+        # in one product.
         self._project = np.concatenate([b.pixels_from_world for b in self.bounds])
-        self._near = np.array([b.near for b in self.bounds])
-        self._positions = np.array([b.position for b in self.bounds])  # (cameras, 3)
+        self._positions = [tuple(float(x) for x in b.position) for b in self.bounds]
         self._objects: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
     def of_object(self, obj) -> Drawn:
@@ -53,34 +52,33 @@ class DrawCache:
         return Drawn(instance_rows(parts), self.rects(corners), self._inside(parts, corners))
 
     def rects(self, corners: np.ndarray) -> tuple[Rect | None, ...]:
-        """Per camera, ``CameraBounds.rect_of(corners)``, for all cameras at once."""
-        n = len(self.bounds)
-        points = (self._project @ corners).reshape(n, 3, -1)
-        w = points[:, 2]
-        behind = np.any(w <= self._near[:, None], axis=1) | ~np.all(np.isfinite(points),
-                                                                     axis=(1, 2))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u, v = points[:, 0] / w, points[:, 1] / w
-        spans = np.stack([u.min(axis=1), u.max(axis=1), v.min(axis=1), v.max(axis=1)], axis=1)
+        """Per camera, ``CameraBounds.rect_of(corners)``, for all cameras from one product.
+        An object has a few dozen corners: past the product, plain floats are quicker than
+        numpy's calls on arrays this small."""
+        rows = (self._project @ corners).tolist()
         out = []
-        for b, far_away, (u0, u1, v0, v1) in zip(self.bounds, behind.tolist(), spans.tolist()):
-            if far_away:
-                out.append(b.full)
+        for c, b in enumerate(self.bounds):
+            us, vs, ws = rows[3 * c], rows[3 * c + 1], rows[3 * c + 2]
+            if min(ws) <= b.near or not math.isfinite(sum(us) + sum(vs) + sum(ws)):
+                out.append(b.full)  # reaching behind the camera (or degenerate)
                 continue
-            c0, c1 = max(math.floor(u0) - MARGIN, 0), min(math.ceil(u1) + MARGIN, b.width)
-            r0, r1 = max(math.floor(v0) - MARGIN, 0), min(math.ceil(v1) + MARGIN, b.height)
+            u = [a / w for a, w in zip(us, ws)]
+            v = [a / w for a, w in zip(vs, ws)]
+            c0, c1 = max(math.floor(min(u)) - MARGIN, 0), min(math.ceil(max(u)) + MARGIN, b.width)
+            r0, r1 = max(math.floor(min(v)) - MARGIN, 0), min(math.ceil(max(v)) + MARGIN, b.height)
             out.append(None if c0 >= c1 or r0 >= r1 else (r0, r1, c0, c1))
         return tuple(out)
 
     def _inside(self, parts: Sequence[Part], corners: np.ndarray) -> tuple[bool, ...]:
         """Per camera, whether it may be inside one of the parts (``contains``), asking
         ``contains`` only of the parts whose box the camera is near (``near_box``)."""
-        world = corners[:3].reshape(3, len(parts), 8)
         reach = 3.0 * INSIDE_MARGIN
-        lo, hi = world.min(axis=2) - reach, world.max(axis=2) + reach  # (3, parts)
-        near = np.all((self._positions[:, :, None] >= lo) & (self._positions[:, :, None] <= hi),
-                      axis=1)  # (cameras, parts)
-        if not near.any():
-            return (False,) * len(self.bounds)
-        return tuple(any(contains(p, b.position) for p, close in zip(parts, row) if close)
-                     for b, row in zip(self.bounds, near.tolist()))
+        xyz = corners[:3].tolist()
+        boxes = [[(min(axis[8 * i : 8 * i + 8]) - reach, max(axis[8 * i : 8 * i + 8]) + reach)
+                  for axis in xyz] for i in range(len(parts))]
+        out = []
+        for b, position in zip(self.bounds, self._positions):
+            near = [p for p, box in zip(parts, boxes)
+                    if all(lo <= x <= hi for x, (lo, hi) in zip(position, box))]
+            out.append(bool(near) and any(contains(p, b.position) for p in near))
+        return tuple(out)
