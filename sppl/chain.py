@@ -189,14 +189,42 @@ class Sampler:
         if new is None:
             self.stats.record(proposal.move, proposal.label, False)
             return trace
-        with np.errstate(invalid="ignore"):  # inf - inf is NaN, handled just below
-            log_alpha = self.log_alpha(trace, proposal, new)
-        if math.isnan(log_alpha):
+        if proposal.deferred is not None:
+            accepted = self._accept_deferred(trace, proposal, new)
+        else:
+            with np.errstate(invalid="ignore"):  # inf - inf is NaN, handled just below
+                log_alpha = self.log_alpha(trace, proposal, new)
+            accepted = None if math.isnan(log_alpha) else accept(log_alpha, self.rng)
+        if accepted is None:
             self.stats.record_nan(proposal.move, proposal.label)
             return trace
-        accepted = accept(log_alpha, self.rng)
         self.stats.record(proposal.move, proposal.label, accepted)
         return new if accepted else trace
+
+    def _accept_deferred(self, trace: Trace, proposal: moves.Proposal, new: Trace):
+        """``accept`` of the exact ratio (None where it is NaN), computing the proposal's
+        deferred part only where its upper bound cannot decide: with the ratio at most
+        ``bound`` below 0, the uniform that ``accept`` draws rejects whenever log u >= bound.
+        The same uniforms are drawn, and the same decisions made, as with the deferred part
+        computed every time, whenever that part is a number (nothing it computes draws from
+        the chain's generator)."""
+        with np.errstate(invalid="ignore"):
+            known = self.known_log_alpha(trace, proposal, new)
+            bound = known + proposal.deferred_bound
+        if math.isnan(bound):
+            return None
+        if bound < 0.0:
+            u = self.rng.random()
+            log_u = math.log(u) if u > 0.0 else -math.inf
+            if log_u >= bound:
+                return False
+        with np.errstate(invalid="ignore"):
+            log_alpha = known + proposal.deferred()
+        if math.isnan(log_alpha):
+            return None
+        if bound < 0.0:
+            return log_u < log_alpha
+        return accept(log_alpha, self.rng)
 
     def drive(self, steps):
         """Run a generator of ``decide``'s kind to its end, answering every request with
@@ -211,6 +239,13 @@ class Sampler:
     def log_alpha(self, trace: Trace, proposal: moves.Proposal, new: Trace) -> float:
         """log of the Metropolis-Hastings ratio of moving from ``trace`` to ``new`` (during an
         annealed warm-up, with the likelihood raised to the warm-up's power)."""
+        log_alpha = self.known_log_alpha(trace, proposal, new)
+        if proposal.deferred is not None:
+            log_alpha += proposal.deferred()
+        return log_alpha
+
+    def known_log_alpha(self, trace: Trace, proposal: moves.Proposal, new: Trace) -> float:
+        """``log_alpha`` less the proposal's deferred part."""
         beta = self.warmup.beta
         if beta == 1.0:
             log_alpha = new.score - trace.score

@@ -50,8 +50,8 @@ START_STEP = 4.0
 # wide enough to leave a fit that is off, and narrow enough to land inside a posterior that
 # is millimetres wide, as a visible object's is at 96x96 pixels and a few percent noise.
 SPREADS = (0.5, 0.05, 0.005)
-HALVINGS = 3
-MAX_EVALUATIONS = 40
+HALVINGS = 6
+MAX_EVALUATIONS = 100
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
@@ -153,9 +153,41 @@ def log_density(cls: ObjectClass, values, fitted) -> float:
     return total + float(np.logaddexp.reduce(spread)) - math.log(len(SPREADS))
 
 
+def log_density_bound(cls: ObjectClass, values) -> float:
+    """The largest ``log_density(cls, values, fitted)`` over every fit: its Gaussians at
+    their peaks and each categorical parameter at its likelier outcome."""
+    total = 0.0
+    spread = np.zeros(len(SPREADS))
+    for p in cls.parameters:
+        if p.continuous:
+            for k, c in enumerate(SPREADS):
+                spread[k] -= math.log(c * p.proposal_scale) + 0.5 * _LOG_2PI
+        elif isinstance(p.domain, Finite):
+            others = len(p.domain.values) - 1
+            total += max(math.log(1.0 - EPS), math.log(EPS / others)) if others else 0.0
+        else:
+            total += p.log_prob(values[p.name], values)
+    return total + float(np.logaddexp.reduce(spread)) - math.log(len(SPREADS))
+
+
 def log_mixture(sampler, state: Trace, cls: ObjectClass, values, fitted) -> float:
     return float(np.logaddexp(math.log1p(-MIX) + log_density(cls, values, fitted),
                               math.log(MIX) + sampler.birth.log_density(cls, values, state)))
+
+
+def log_mixture_bound(sampler, state: Trace, cls: ObjectClass, values) -> float:
+    """An upper bound of ``log_mixture`` over every fit, computed without one."""
+    return float(np.logaddexp(math.log1p(-MIX) + log_density_bound(cls, values),
+                              math.log(MIX) + sampler.birth.log_density(cls, values, state)))
+
+
+def refitted_back(sampler, state: Trace, old: SceneObject, new: SceneObject):
+    """The reverse density of a move that replaced ``old`` by the fitted ``new`` in
+    ``state``, log q_mixture(old | the fit of old's class from new), deferred: the function
+    that computes it (one more fit), and an upper bound of it (no fit needed)."""
+    return (lambda: log_mixture(sampler, state, old.cls, old.values,
+                                fit(sampler, state, old.cls, new)),
+            log_mixture_bound(sampler, state, old.cls, old.values))
 
 
 def draw(cls: ObjectClass, fitted, rng: np.random.Generator) -> dict[str, Any]:
@@ -206,7 +238,7 @@ def propose_refit(sampler, trace: Trace, rng: np.random.Generator, k: int | None
         return Proposal("refit", old.cls.name, objects, trace.noise, (obj,), -math.inf,
                         tries=Refit(state, k))
     log_q_forward = log_mixture(sampler, state, cls, values, forward)
-    back = fit(sampler, state, old.cls, obj)
-    log_q_back = log_mixture(sampler, state, old.cls, old.values, back)
-    return Proposal("refit", old.cls.name, objects, trace.noise, (obj,),
-                    log_q_back - log_q_forward, tries=Refit(state, k))
+    # The reverse fit is computed only when the proposal has a chance (Sampler.decide).
+    back, bound = refitted_back(sampler, state, old, obj)
+    return Proposal("refit", old.cls.name, objects, trace.noise, (obj,), -log_q_forward,
+                    tries=Refit(state, k), deferred=back, deferred_bound=bound)

@@ -167,12 +167,12 @@ def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None
     log_q_forward = (_log(sampler.jump["merge"]) - math.log(n) + float(logw[j])
                      - math.log(n_classes)
                      + fitting.log_mixture(sampler, state, cls, new.values, forward))
-    back = fitting.fit(sampler, state, old.cls, new)
+    # log q(reverse), less the fitted density of old, which is deferred (Sampler.decide).
     log_q_back = (_log(sampler.jump["split"]) - math.log(n - 1) - 2 * math.log(n_classes)
-                  + fitting.log_mixture(sampler, state, old.cls, old.values, back)
                   + log_q_born(sampler, gone, state))
+    back, bound = fitting.refitted_back(sampler, state, old, new)
     return Proposal("merge", old.cls.name, merged, trace.noise, (new,),
-                    log_q_back - log_q_forward, tries=tag)
+                    log_q_back - log_q_forward, tries=tag, deferred=back, deferred_bound=bound)
 
 
 def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None = None,
@@ -209,10 +209,10 @@ def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None
                      + fitting.log_mixture(sampler, state, fitted.cls, fitted.values, forward)
                      + log_q_born(sampler, born, state))
     logw = partner_log_weights(split, born_place, screen_of(sampler))
-    back = fitting.fit(sampler, state, old.cls, fitted)
+    # log q(reverse), less the fitted density of old, which is deferred (Sampler.decide).
     log_q_back = (_log(sampler.jump["merge"]) - math.log(n) + float(logw[j])
-                  - math.log(n_classes)
-                  + fitting.log_mixture(sampler, state, old.cls, old.values, back))
+                  - math.log(n_classes))
+    back, bound = fitting.refitted_back(sampler, state, old, fitted)
     return Proposal("split", old.cls.name, split, trace.noise, (fitted, born),
-                    log_q_back - log_q_forward, tries=tag)
+                    log_q_back - log_q_forward, tries=tag, deferred=back, deferred_bound=bound)
 

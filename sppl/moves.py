@@ -4,7 +4,7 @@ Nothing here names a concrete class: every move is built from what ``ObjectClass
 (parameters, domains, priors, proposal scales, rate). Each proposal carries
 ``log_q_ratio = log q(reverse) - log q(forward)``, so that the acceptance ratio is
 
-    log alpha = score(new) - score(old) + log_q_ratio
+    log alpha = score(new) - score(old) + log_q_ratio (+ ratio_fn(new) + deferred())
 
 with the scores of ``sppl.trace`` (densities with respect to the unit-rate marked Poisson
 process, so the scene is a set). The forward and reverse densities of the model jumps are
@@ -38,6 +38,11 @@ class Proposal:
     log_q_ratio: float = 0.0
     # The part of the ratio that depends on the proposed state's renders, if any.
     ratio_fn: Callable[[Trace], float] | None = None
+    # A part of log q(reverse) that is dear to compute (a refit's reverse fit), if any, and
+    # an upper bound of it: the sampler computes it only when the bound cannot decide
+    # (``Sampler.decide``); the acceptance ratio includes it.
+    deferred: Callable[[], float] | None = None
+    deferred_bound: float = math.inf
     # A multiple-try jump's other candidates and reference points (``sppl.tries``), which its
     # reverse reuses.
     tries: Any = None

@@ -5,7 +5,9 @@ checks, and the checks fail when the reverse density is left out."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
+import numpy as np
 import pytest
 from test_verify import seen_world
 from toys import ball_class, block_class, toy_model
@@ -31,16 +33,16 @@ def test_prior_recovery_with_refits():
 def test_prior_recovery_sees_a_refit_taken_for_symmetric(monkeypatch):
     """A refit whose ratio takes the proposal for symmetric (the reverse density set to the
     forward one): the chain drifts towards the fitted values, and the check fails."""
-    real = fit.log_mixture
-    last = {}
+    real = fit.propose_refit
 
-    def symmetric(sampler, state, cls, values, fitted):
-        if "forward" in last:  # the second call of a proposal: the reverse density
-            return last.pop("forward")
-        last["forward"] = real(sampler, state, cls, values, fitted)
-        return last["forward"]
+    def symmetric(*args, **kwargs):
+        p = real(*args, **kwargs)
+        if p is None:
+            return None
+        return dataclasses.replace(p, log_q_ratio=0.0 if math.isfinite(p.log_q_ratio)
+                                   else p.log_q_ratio, deferred=None)
 
-    monkeypatch.setattr(fit, "log_mixture", symmetric)
+    monkeypatch.setattr(fit, "propose_refit", symmetric)
     model = with_refit(toy_model([ball_class(rate=0.8), block_class(rate=0.5)]))
     report = verify.prior_recovery(model, sweeps=15000, seed=3)
     assert not report.passed, report.table()
@@ -65,8 +67,6 @@ def test_geweke_with_refits(require_gl):
 def test_the_fit_is_deterministic_and_improves_the_scene(require_gl):
     """Fitted twice from the same scene it gives the same values, and they score at least as
     well as where it started."""
-    import numpy as np
-
     from sppl.chain import Sampler
     from sppl.simulate import sample_noise, sample_objects
 
@@ -101,3 +101,87 @@ def test_a_model_weighs_refits(weights):
                           "geometry sphere(0.2) at (x, 0) colour rgb(1, 0, 0) }\n"
                           f"inference {{ jump_weights birth = 1, death = 1, {weights} }}")
     assert model.inference.jump_weights["refit"] == 1.0
+
+
+def test_the_bound_of_a_reverse_density_is_never_below_it(root):
+    """The bound that lets a chain skip a reverse fit is at least the density at any fit,
+    and reached where the fit is the value itself (categorical parameters aside)."""
+    from sppl.lang import load_model
+
+    rng = np.random.default_rng(4)
+    for name in ("shapes.scn", "tabletop.scn", "shapes_plus.scn"):
+        model = load_model(root / "models" / name)
+        for cls in model.classes:
+            for _ in range(50):
+                values = cls.sample_prior(rng)
+                fitted = dict(values)
+                bound = fit.log_density_bound(cls, values)
+                assert fit.log_density(cls, values, fitted) <= bound + 1e-9
+                for p in cls.parameters:
+                    if p.continuous:
+                        fitted[p.name] += float(rng.normal(0.0, p.proposal_scale))
+                    else:
+                        fitted[p.name] = p.sample(rng, fitted)
+                assert fit.log_density(cls, values, fitted) <= bound + 1e-9
+
+
+def _shapes_chain(root, sampler_class, sweeps=120):
+    """Sweeps of a chain on the three shapes, which jumps every sweep (refits, merges and
+    splits among the jumps): each sweep's state and the sampler."""
+    from sppl.lang import load_model
+    from sppl.observations import load_observations
+    from sppl.render import Renderer
+    from sppl.scoring import Scorer
+
+    model = load_model(root / "models" / "shapes.scn")
+    obs = load_observations(root / "examples" / "three_shapes" / "obs")
+    sampler = sampler_class(model, Scorer(model, obs, Renderer(model.render)),
+                            np.random.default_rng(4))
+    trace, states = sampler.initial_trace(), []
+    for _ in range(sweeps):
+        trace = sampler.sweep(trace)
+        states.append((trace.score, tuple(o.as_dict()["params"].get("x") for o in trace.objects)))
+    return states, sampler
+
+
+def test_a_reverse_fit_left_undone_changes_no_decision(require_gl, root, monkeypatch):
+    """A chain that computes a refit's, merge's or split's reverse fit only where its bound
+    cannot decide draws exactly the states of one that always computes it; most are left
+    undone; and a bound set too low (a ratio that can exceed it) changes the chain."""
+    from sppl.chain import Sampler, accept
+
+    class Eager(Sampler):
+        def _accept_deferred(self, trace, proposal, new):
+            log_alpha = self.log_alpha(trace, proposal, new)
+            return None if math.isnan(log_alpha) else accept(log_alpha, self.rng)
+
+    real = fit.refitted_back
+    asked = {"made": 0, "computed": 0}
+
+    def counted(*args):
+        back, bound = real(*args)
+        asked["made"] += 1
+
+        def computed():
+            asked["computed"] += 1
+            return back()
+
+        return computed, bound
+
+    monkeypatch.setattr(fit, "refitted_back", counted)
+    lazy, sampler = _shapes_chain(root, Sampler)
+    made, computed = asked["made"], asked["computed"]
+    eager, _ = _shapes_chain(root, Eager)
+    assert lazy == eager
+    assert made > 20 and computed < made / 2, (made, computed)
+    accepted = sum(sampler.stats.counts[k][1] for k in sampler.stats.counts
+                   if k[0] in ("refit", "merge", "split"))
+    assert accepted > 0
+
+    def too_low(*args):
+        back, bound = real(*args)
+        return back, bound - 40.0
+
+    monkeypatch.setattr(fit, "refitted_back", too_low)
+    wrong, _ = _shapes_chain(root, Sampler)
+    assert wrong != eager
