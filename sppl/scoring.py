@@ -27,7 +27,7 @@ from .errors import ObservationError
 from .likelihoods import Likelihood, get_likelihood, gpu_statistics
 from .model import Model
 from .observations import Observations
-from .render.bounds import CameraBounds, meets, union
+from .render.bounds import CameraBounds, union
 
 log = logging.getLogger(__name__)
 
@@ -186,15 +186,20 @@ def _paste(block, rect, patch):
 
 
 def _crop(block, rect):
-    """The terms of a camera's block inside rect, less the pixels outside the block (which
-    are 0), or None if the two do not meet."""
+    """The terms of a camera's block inside rect (0 where rect reaches past the block), or
+    None if the two do not meet."""
     if block is None:
         return None
     (r0, r1, c0, c1), terms = block
-    if not meets((r0, r1, c0, c1), rect):
+    if not (rect[0] < r1 and r0 < rect[1] and rect[2] < c1 and c0 < rect[3]):
         return None
-    return terms[max(rect[0], r0) - r0 : min(rect[1], r1) - r0,
-                 max(rect[2], c0) - c0 : min(rect[3], c1) - c0]
+    if r0 <= rect[0] and rect[1] <= r1 and c0 <= rect[2] and rect[3] <= c1:
+        return terms[rect[0] - r0 : rect[1] - r0, rect[2] - c0 : rect[3] - c0]
+    crop = np.zeros((rect[1] - rect[0], rect[3] - rect[2], 2), dtype=terms.dtype)
+    a0, a1, b0, b1 = max(rect[0], r0), min(rect[1], r1), max(rect[2], c0), min(rect[3], c1)
+    crop[a0 - rect[0] : a1 - rect[0], b0 - rect[2] : b1 - rect[2]] = \
+        terms[a0 - r0 : a1 - r0, b0 - c0 : b1 - c0]
+    return crop
 
 
 # Past this fraction of the atlas's pixels, a full render is cheaper than regions.
@@ -238,11 +243,10 @@ class Scorer(ReferenceScorer):
                 self._constant[(t.frame, t.kind)] = (int(valid.sum()), float(np.sum(r * r)))
         self._slot = {(t.frame, t.kind): (index[t.frame], 0 if t.kind == "image" else 1)
                       for t in self.terms}
-        self._keys = list(self._slot)
-        self._cams = np.array([self._slot[k][0] for k in self._keys], dtype=int)
-        self._kinds = np.array([self._slot[k][1] for k in self._keys], dtype=int)
-        self._counts = np.array([[self._constant[k][0], 0.0] for k in self._keys])
-        self._empty = np.array([self._constant[k][1] for k in self._keys])
+        # Per term: its key, its place in the flattened (cameras, 2) sums, its count of values
+        # and its sum of squares against the empty scene.
+        self._terms = [(k, 2 * c + kind, float(self._constant[k][0]), self._constant[k][1])
+                       for k, (c, kind) in self._slot.items()]
         self.pixels = PixelScorer(renderer.settings, [self.cameras[f] for f in self.frames],
                                   [observed[f] for f in self.frames])
         self.draws = DrawCache([CameraBounds(self.cameras[f]) for f in self.frames])
@@ -296,10 +300,10 @@ class Scorer(ReferenceScorer):
         return [*self._static, *(self.draws.of_object(o) for o in objects)]
 
     def _stats(self, sums: np.ndarray) -> dict[tuple[int, str], np.ndarray]:
-        # One array for all the terms, each term's statistics a row of it.
-        out = self._counts.copy()
-        np.maximum(self._empty + sums[self._cams, self._kinds], 0.0, out=out[:, 1])
-        return dict(zip(self._keys, out))
+        # A few terms: plain floats, then one small array each, beat numpy's indexing.
+        flat = sums.ravel().tolist()
+        return {key: np.array((n, max(empty + flat[i], 0.0)))
+                for key, i, n, empty in self._terms}
 
     def _incremental(self, old_objects, objects, before: _Pixels) -> _Pixels | None:
         """The new hypothesis's record from its parent's, re-rendering only the rectangles
@@ -318,7 +322,10 @@ class Scorer(ReferenceScorer):
         rects = of_object(changed[0]).rects
         for o in changed[1:]:
             rects = [union(r, s) for r, s in zip(rects, of_object(o).rects)]
-        area = sum((r[1] - r[0]) * (r[3] - r[2]) for r in rects if r is not None)
+        area = 0
+        for r in rects:
+            if r is not None:
+                area += (r[1] - r[0]) * (r[3] - r[2])
         if area > _INCREMENTAL_AREA * self._area:
             return None
         if area == 0:
@@ -328,11 +335,11 @@ class Scorer(ReferenceScorer):
         sums = before.sums.copy()
         kept = []
         change = self.pixels.change
-        for c, (rect, patch) in enumerate(zip(rects, patches)):
-            if patch is None:
-                continue
-            sums[c] += change(patch, _crop(blocks[c], rect))
-            kept.append((c, rect, patch))
+        for c, patch in enumerate(patches):
+            if patch is not None:
+                rect = rects[c]
+                sums[c] += change(patch, _crop(blocks[c], rect))
+                kept.append((c, rect, patch))
         return _Pixels(sums, parent=before, patches=tuple(kept))
 
 

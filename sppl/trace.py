@@ -48,6 +48,9 @@ class SceneObject:
     parts: tuple[Part, ...] = field(repr=False)
     # Whether the no-overlap constraint applies to this object (it has a footprint).
     constrained: bool = field(repr=False, default=False)
+    # What renderers work out from the object once, by who worked it out (a scorer's draw
+    # list, say): it lives and dies with the object. Not copied by dataclasses.replace.
+    cache: dict = field(repr=False, default_factory=dict, init=False)
 
     # The footprint is made only when a check needs it: a chain proposes thousands of objects,
     # most of them far from every other, and the bounding box tells those apart first.

@@ -86,6 +86,8 @@ def near_box(world: np.ndarray, point: np.ndarray, margin: float) -> bool:
 
 def world_corners(parts) -> np.ndarray:
     """The corners of every part's posed bounding box, (4, 8 * len(parts)), homogeneous."""
+    if len(parts) == 1:
+        return parts[0].matrix @ unit_corners(parts[0].primitive)
     return np.hstack([p.matrix @ unit_corners(p.primitive) for p in parts])
 
 

@@ -3,14 +3,13 @@
 A chain proposes thousands of hypotheses that share all but one object, and the objects are
 immutable, so an object's instance rows (its parts' matrices and colours, ready for the GPU) and
 the screen rectangle it covers in each camera are computed the first time it is drawn and kept
-while the object lives. A pass then draws only the objects whose rectangle meets the region it
+in the object's cache, for as long as it lives. A pass then draws only the objects whose rectangle meets the region it
 renders: the whole image, or the few pixels a move can change.
 """
 
 from __future__ import annotations
 
 import math
-import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -36,12 +35,11 @@ class DrawCache:
         # in one product.
         self._project = np.concatenate([b.pixels_from_world for b in self.bounds])
         self._positions = [tuple(float(x) for x in b.position) for b in self.bounds]
-        self._objects: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
     def of_object(self, obj) -> Drawn:
-        drawn = self._objects.get(obj)
+        drawn = obj.cache.get(self)
         if drawn is None:
-            drawn = self._objects[obj] = self.of_parts(obj.parts)
+            drawn = obj.cache[self] = self.of_parts(obj.parts)
         return drawn
 
     def of_parts(self, parts: Sequence[Part]) -> Drawn:

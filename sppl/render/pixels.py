@@ -30,7 +30,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import RenderError
-from ..geometry import Part
+from ..geometry import Part, linear_inverse
 from ..model import RenderSettings
 from .bounds import Rect, closed, union
 from .context import claim_state, gl_context
@@ -43,32 +43,21 @@ if TYPE_CHECKING:
 INSTANCE_FLOATS = 28
 INSTANCE_FORMAT = "16f 9f 3f/i"
 MISSING = -1.0  # an observed value that marks "no term here" (observations are never negative)
+TRIANGLES = moderngl.TRIANGLES
 
 
 def instance_rows(parts: Sequence[Part]) -> dict[str, np.ndarray]:
     """Per primitive, the instance rows of its parts, in the parts' order. Parts whose matrix
     is singular are left out, as ``Renderer`` leaves them out (they enclose nothing)."""
-    groups: dict[str, list[Part]] = {}
+    groups: dict[str, list[list[float]]] = {}
     for part in parts:
-        groups.setdefault(part.primitive, []).append(part)
-    out = {}
-    for primitive, group in groups.items():
-        matrices = np.array([p.matrix for p in group], dtype=float)
-        linear = matrices[:, :3, :3]
-        try:
-            inverse = np.linalg.inv(linear)
-        except np.linalg.LinAlgError:
-            keep = [i for i, m in enumerate(linear) if np.linalg.matrix_rank(m) == 3]
-            if not keep:
-                continue
-            group, matrices, linear = [group[i] for i in keep], matrices[keep], linear[keep]
-            inverse = np.linalg.inv(linear)
-        rows = np.empty((len(group), INSTANCE_FLOATS), dtype="f4")
-        rows[:, :16] = matrices.transpose(0, 2, 1).reshape(-1, 16)  # column-major model
-        rows[:, 16:25] = inverse.reshape(-1, 9)  # inverse's rows = inverse-transpose's columns
-        rows[:, 25:] = [p.colour for p in group]
-        out[primitive] = rows
-    return out
+        inverse = linear_inverse(part.matrix)
+        if inverse is None:
+            continue
+        # Column-major model matrix; the inverse's rows are the inverse-transpose's columns.
+        groups.setdefault(part.primitive, []).append(
+            [*part.matrix.T.ravel().tolist(), *inverse, *part.colour])
+    return {primitive: np.array(rows, dtype="f4") for primitive, rows in groups.items()}
 
 
 class _Slot:
@@ -79,6 +68,7 @@ class _Slot:
     def __init__(self) -> None:
         self.buffers: dict[str, moderngl.Buffer] = {}
         self.vaos: dict[str, moderngl.VertexArray] = {}
+        self.entries: dict[str, tuple] = {}  # PixelScorer._entry's, by primitive
 
 
 class PixelScorer:
@@ -202,11 +192,9 @@ class PixelScorer:
         return out
 
     def change(self, new: np.ndarray, old: np.ndarray | None) -> np.ndarray:
-        """Float64 sums of new's terms less old's (None: no terms)."""
+        """Float64 sums of new's terms less old's (None: no terms; else of new's shape)."""
         if old is None:
             return self.total(new)
-        if old.shape != new.shape:
-            return self.total(new) - self.total(old)
         # One difference of the blocks in float64 (exact: both are float32) and one sum.
         flat = np.subtract(new, old, dtype=np.float64).reshape(-1, 2)
         return self._ones[: len(flat)] @ flat
@@ -281,18 +269,21 @@ class PixelScorer:
         slot = self._slots[c]
         for primitive, chunks in rows.items():
             data = chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
-            vao = slot.vaos.get(primitive)
-            if vao is None or slot.buffers[primitive].size < data.nbytes:
-                vao = self._vao(c, slot, primitive, data.nbytes)
-            slot.buffers[primitive].write(data)
-            culling = cull and closed(primitive)
+            entry = slot.entries.get(primitive)
+            if entry is None or entry[2] < data.nbytes:
+                entry = self._entry(c, slot, primitive, data.nbytes)
+            vao, buffer, _, is_closed = entry
+            buffer.write(data)
+            culling = cull and is_closed
             if culling != self._culling:
                 (self.ctx.enable if culling else self.ctx.disable)(moderngl.CULL_FACE)
                 self._culling = culling
-            vao.render(moderngl.TRIANGLES, instances=len(data))
+            vao.render(TRIANGLES, -1, 0, len(data))
         return cover if region is None else region
 
-    def _vao(self, c: int, slot: _Slot, primitive: str, nbytes: int) -> moderngl.VertexArray:
+    def _entry(self, c: int, slot: _Slot, primitive: str, nbytes: int) -> tuple:
+        """Camera c's (vertex array, instance buffer, its size, closed) for a primitive, with
+        room for nbytes of instance rows."""
         buffer = slot.buffers.get(primitive)
         if buffer is None:
             buffer = slot.buffers[primitive] = self.ctx.buffer(reserve=max(nbytes, 1024))
@@ -303,7 +294,9 @@ class PixelScorer:
             ])
         elif buffer.size < nbytes:
             buffer.orphan(2 * nbytes)
-        return slot.vaos[primitive]
+        entry = slot.entries[primitive] = (slot.vaos[primitive], buffer, buffer.size,
+                                           closed(primitive))
+        return entry
 
     def _mesh(self, primitive: str) -> moderngl.Buffer:
         vbo = self._meshes.get(primitive)

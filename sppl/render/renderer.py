@@ -23,7 +23,7 @@ import trimesh
 
 from ..camera import Camera
 from ..errors import RenderError
-from ..geometry import MESH_PREFIX, PRIMITIVES, Part, unit_mesh
+from ..geometry import MESH_PREFIX, PRIMITIVES, Part, linear_inverse, unit_mesh
 from ..model import RenderSettings
 from .bounds import closed, contains
 from .context import claim_state, gl_context
@@ -207,14 +207,13 @@ class Renderer:
         vao = self._vaos.get(part.primitive)
         if vao is None:
             vao = self._upload(part.primitive)
-        linear = np.asarray(part.matrix, dtype=float)[:3, :3]
-        try:
-            normal_matrix = np.linalg.inv(linear).T
-        except np.linalg.LinAlgError:
+        inverse = linear_inverse(np.asarray(part.matrix, dtype=float))
+        if inverse is None:
             return  # a part scaled to zero thickness encloses nothing; the ray caster agrees
         program = self._programs[part.primitive in RAY_CAST]
         program["model"].write(_column_major(part.matrix))
-        program["normal_matrix"].write(_column_major(normal_matrix))
+        # The normal matrix is the inverse's transpose: column-major, the inverse row by row.
+        program["normal_matrix"].write(np.array(inverse, dtype="f4").tobytes())
         program["colour"].value = tuple(float(c) for c in part.colour)
         vao.render(moderngl.TRIANGLES)
 
