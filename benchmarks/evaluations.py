@@ -15,14 +15,17 @@ circle, every camera recording RGB and depth (Gaussian likelihood over every pix
   (Scorer.evaluate with the parent trace), against full rescoring by each path.
 The memory floor is the time to read the observation arrays once (a sum over each).
 
-Every figure is the median of --repeats runs of at least --seconds each; the paths run
-interleaved within a repeat, so the ratios compare like with like on a shared machine. The GL
-renderer in use is printed first: on a machine with a GPU the same command gives the GPU figure.
+Every rate is the median of --repeats runs of at least --seconds each. The paths run
+interleaved within a repeat, and each ratio is the median over the repeats of the ratio
+measured within one repeat (its range is printed too): on a shared machine whose speed drifts
+by tens of percent from one second to the next, that compares like with like. The GL renderer
+in use is printed first: on a machine with a GPU the same command gives the GPU figure.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import itertools
 import math
 import statistics
@@ -92,8 +95,22 @@ def rate(fn, per_call: int, seconds: float) -> float:
             return calls * per_call / elapsed
 
 
-def measure(paths: dict, repeats: int, seconds: float) -> dict[str, float]:
-    """Median rates; a path given as (None, remote) is measured by ``remote(seconds)``."""
+class Rates(dict):
+    """Median rate per path, with every repeat's rates kept for the ratios."""
+
+    def __init__(self, runs: dict[str, list[float]]) -> None:
+        super().__init__({name: statistics.median(r) for name, r in runs.items()})
+        self.runs = runs
+
+    def ratio(self, a: str, b: str) -> tuple[float, float, float]:
+        """How many times faster a is than b: the median over the repeats of the ratio within
+        each repeat, and the smallest and largest of those."""
+        within = [x / y for x, y in zip(self.runs[a], self.runs[b])]
+        return statistics.median(within), min(within), max(within)
+
+
+def measure(paths: dict, repeats: int, seconds: float) -> Rates:
+    """Rates of each path; a path given as (None, remote) is measured by ``remote(seconds)``."""
     for fn, per in paths.values():  # warm up: shaders, buffers, caches
         for _ in range(3 if fn is not None else 0):
             fn()
@@ -101,7 +118,12 @@ def measure(paths: dict, repeats: int, seconds: float) -> dict[str, float]:
     for _ in range(repeats):
         for name, (fn, per) in paths.items():
             runs[name].append(rate(fn, per, seconds) if fn is not None else per(seconds))
-    return {name: statistics.median(r) for name, r in runs.items()}
+    return Rates(runs)
+
+
+def times(ratio: tuple[float, float, float]) -> str:
+    median, low, high = ratio
+    return f"{median:.2f}x, {low:.2f} to {high:.2f}"
 
 
 def setting(model, renderer, k, n_cameras, size, rng):
@@ -144,6 +166,11 @@ def move_sequence(model, objects, rng):
         values["y"] += rng.normal(0, 0.05)
         out.append((make_object(model, obj.cls, values),) + objects[1:])
     return out
+
+
+def anew(objects):
+    """The objects, the first a new object with the same values and parts."""
+    return (dataclasses.replace(objects[0]),) + objects[1:]
 
 
 def memory_floor(obs) -> float:
@@ -190,7 +217,7 @@ def main(argv=None) -> None:
         r = measure(paths, args.repeats, args.seconds)
         row = [str(k), str(n_cam), f"{size}"]
         for name in names:
-            ratio = "" if name == "fast" else f" ({r['fast'] / r[name]:.2f}x)"
+            ratio = "" if name == "fast" else f" ({times(r.ratio('fast', name))})"
             row.append(f"{r[name]:,.0f}{ratio}")
         rows.append(row)
         if (k, n_cam, size) == (3, 2, 128) or focus is None:
@@ -205,25 +232,31 @@ def main(argv=None) -> None:
     state = sampler.make_trace(objects, NOISE)
     moves = move_sequence(model, objects, rng)
     move_parts = [fast.parts(m) for m in moves]
+    # Every evaluation gets the moved object anew, as a chain proposes a new object at every
+    # move: what sppl works out per object (its instance rows and screen rectangles) is part
+    # of the evaluation, as setting its node's matrix is part of Panda3D's.
     paths = {
-        "incremental (fast)": (lambda: [fast.evaluate(m, parent=state) for m in moves], MOVES),
-        "full (fast)": (lambda: [fast.evaluate(m) for m in moves], MOVES),
+        "incremental (fast)": (lambda: [fast.evaluate(anew(m), parent=state) for m in moves],
+                               MOVES),
+        "full (fast)": (lambda: [fast.evaluate(anew(m)) for m in moves], MOVES),
         "reference": (lambda: [ref.evaluate(m) for m in moves], MOVES),
         **({"panda3d": (None, lambda seconds: panda.rate(move_parts, seconds))}
            if panda is not None else {}),
         "memory floor": (memory_floor(obs), 1),
     }
     r = measure(paths, args.repeats, args.seconds)
-    inc = r["incremental (fast)"]
     table(f"Single-object parameter moves, K={k}, {n_cam} cameras, {size}x{size}: "
-          "evaluations per second (incremental path's speed-up over each)",
+          "evaluations per second (incremental path's speed-up over each: the median of the "
+          "repeats' ratios, and their range)",
           ["path", "evals/s", "incremental is"],
-          [[name, f"{v:,.0f}", "" if name.startswith("incremental") else f"{inc / v:.2f}x"]
+          [[name, f"{v:,.0f}",
+            "" if name.startswith("incremental") else times(r.ratio("incremental (fast)", name))]
            for name, v in r.items()])
     floor = r["memory floor"]
     print(f"\nMemory floor (reading the observations once): {floor:,.0f} per second; "
           f"the fast path is {floor / full['fast']:.1f}x from it on full scenes, "
-          f"{floor / full[f'batch {BATCH}']:.1f}x batched and {floor / inc:.1f}x incrementally.")
+          f"{floor / full[f'batch {BATCH}']:.1f}x batched and "
+          f"{r.ratio('memory floor', 'incremental (fast)')[0]:.1f}x incrementally.")
     if panda is not None:
         panda.close()
 
