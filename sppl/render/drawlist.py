@@ -3,8 +3,8 @@
 A chain proposes thousands of hypotheses that share all but one object, and the objects are
 immutable, so an object's instance rows (its parts' matrices and colours, ready for the GPU) and
 the screen rectangle it covers in each camera are computed the first time it is drawn and kept
-in the object's cache, for as long as it lives. A pass then draws only the objects whose rectangle meets the region it
-renders: the whole image, or the few pixels a move can change.
+in the object's cache, for as long as it lives. A pass then draws only the objects whose
+rectangle meets the region it renders: the whole image, or the few pixels a move can change.
 """
 
 from __future__ import annotations

@@ -39,8 +39,7 @@ from .renderer import FLIP_Y, RAY_CAST, VERTEX_FORMAT, _column_major, flat_verti
 if TYPE_CHECKING:
     from .drawlist import Drawn
 
-# Floats per instance: model matrix (16), normal matrix (9), colour (3), all column-major.
-INSTANCE_FLOATS = 28
+# An instance's row of floats: model matrix (16), normal matrix (9), colour (3), column-major.
 INSTANCE_FORMAT = "16f 9f 3f/i"
 MISSING = -1.0  # an observed value that marks "no term here" (observations are never negative)
 TRIANGLES = moderngl.TRIANGLES
@@ -83,14 +82,14 @@ class PixelScorer:
         self.ctx = ctx = gl_context()
         self.cameras = list(cameras)
         light = np.asarray(settings.light, dtype=float)
-        # Each camera has its own pair of programs, whose uniforms are set here once: writing
-        # a camera's ten uniforms before each of its passes cost more than the draws.
         # Each camera's observation stays bound to a texture unit of its own (while there
         # are units enough), so that a pass need not bind it.
         units = min(len(self.cameras), ctx.info["GL_MAX_TEXTURE_IMAGE_UNITS"])
         self._unit = [c % units for c in range(len(self.cameras))]
         self._bound: list[int | None] = [None] * units  # which camera's texture each unit holds
         self._culling = False
+        # Each camera has its own pair of programs, whose uniforms are set here once: writing
+        # a camera's ten uniforms before each of its passes cost more than the draws.
         self._programs = []
         for c, camera in enumerate(self.cameras):
             pair = programs(ctx, "terms.vert", "terms.frag")
