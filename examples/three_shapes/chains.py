@@ -1,6 +1,6 @@
 """Four chains on the shipped example, their report, and whether they agree.
 
-    python examples/three_shapes/chains.py                 # 4 chains x 20,000 sweeps: ~15 min
+    python examples/three_shapes/chains.py                 # 4 chains x 20,000 sweeps: ~16 min
     python examples/three_shapes/chains.py --steps 300     # a smoke test
 
 Runs what a user would type,
