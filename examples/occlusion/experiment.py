@@ -1,6 +1,6 @@
 """Occlusion: one camera, three objects, one of them almost hidden behind another.
 
-    python examples/occlusion/experiment.py            # about 5 minutes on two CPU cores
+    python examples/occlusion/experiment.py            # about 4 minutes on two CPU cores
     python examples/occlusion/experiment.py --quick    # a smoke test: a few hundred sweeps
 
 A red cube stands in front of a green cone, so that one RGB camera sees only the cone's tip
