@@ -12,6 +12,21 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # tests import toys.py
 
 
+@pytest.fixture(scope="session", autouse=True)
+def sigint_delivered():
+    """Tests that interrupt a run (in this process or in a `sppl sample` it starts) need
+    SIGINT to reach it; a test session started in the background (`nohup`, `&`) inherits it
+    ignored, and so would every process it starts, so the session takes Python's handler."""
+    import signal
+
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        yield
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    else:
+        yield
+
+
 @pytest.fixture(scope="session")
 def require_gl():
     from sppl.errors import RenderError

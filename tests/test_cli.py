@@ -214,7 +214,10 @@ def test_ctrl_c_leaves_readable_samples_and_summary(obs, root, tmp_path):
             break
     time.sleep(1.0)
     p.send_signal(signal.SIGINT)
-    stdout, stderr = p.communicate(timeout=60)
+    try:
+        stdout, stderr = p.communicate(timeout=60)
+    finally:
+        p.kill()  # a run that did not stop must not outlive the test
     assert p.returncode == 130, stderr
     assert "interrupted after" in stdout
     samples = read_samples(out / "samples.jsonl")

@@ -223,7 +223,10 @@ def test_ctrl_c_stops_every_chain_with_a_summary(model, obs, tmp_path):
             break
     time.sleep(1.0)
     p.send_signal(signal.SIGINT)
-    stdout, stderr = p.communicate(timeout=120)
+    try:
+        stdout, stderr = p.communicate(timeout=120)
+    finally:
+        p.kill()  # a run that did not stop must not outlive the test
     assert p.returncode == 130, stderr
     assert "interrupted after" in stdout
     summary = json.loads((out / "summary.json").read_text())
