@@ -10,7 +10,10 @@ circle, every camera recording RGB and depth (Gaussian likelihood over every pix
 - fast: sppl's Scorer, per-pixel terms on the GL side, one whole hypothesis per call;
 - batch: the same, 16 hypotheses in one call (Scorer.evaluate_many);
 - panda3d: the thesis's renderer, Panda3D offscreen through EGL, colour and depth read back
-  and scored in numpy (skipped with a message when panda3d cannot be imported);
+  and scored in numpy (skipped with a message when panda3d cannot be imported); on Mesa's
+  llvmpipe twice, as llvmpipe runs by default (a rasteriser thread per core) and as sppl runs
+  it (``panda3d, LP 0``: LP_NUM_THREADS=0, rasterising on the calling thread), so that
+  neither renderer is compared at a setting the other does not get;
 - incremental: a single-object parameter move scored from the current state
   (Scorer.evaluate with the parent trace), against full rescoring by each path.
 The memory floor is the time to read the observation arrays once (a sum over each).
@@ -25,7 +28,6 @@ in use is printed first: on a machine with a GPU the same command gives the GPU 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import itertools
 import math
 import statistics
@@ -134,25 +136,29 @@ def setting(model, renderer, k, n_cameras, size, rng):
     return objects, cams, Observations(ROOT, frames)
 
 
-def scorers(model, renderer, cams, obs, panda):
+def scorers(model, renderer, cams, obs, pandas):
     fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
     assert fast.pixels is not None
-    if panda is not None:
+    for panda in pandas.values():
         panda.setup(model.render, cams, [(f.rgb, f.depth) for f in obs.frames])
     return fast, ref
 
 
-def full_paths(model, renderer, objects, cams, obs, panda):
-    fast, ref = scorers(model, renderer, cams, obs, panda)
+def remote(panda, hypotheses):
+    return None, lambda seconds: panda.rate(hypotheses, seconds)
+
+
+def full_paths(model, renderer, objects, cams, obs, pandas):
+    fast, ref = scorers(model, renderer, cams, obs, pandas)
     batch = [objects] * BATCH
     paths = {
         "reference": (lambda: ref.evaluate(objects), 1),
         "fast": (lambda: fast.evaluate(objects), 1),
         f"batch {BATCH}": (lambda: fast.evaluate_many(batch), BATCH),
     }
-    if panda is not None:
-        parts = fast.parts(objects)
-        paths["panda3d"] = (None, lambda seconds: panda.rate([parts], seconds))
+    parts = fast.parts(objects)
+    for name, panda in pandas.items():
+        paths[name] = remote(panda, [parts])
     return paths
 
 
@@ -169,8 +175,10 @@ def move_sequence(model, objects, rng):
 
 
 def anew(objects):
-    """The objects, the first a new object with the same values and parts."""
-    return (dataclasses.replace(objects[0]),) + objects[1:]
+    """The objects, the first with what sppl worked out from it forgotten (as for a new
+    object: a chain proposes one at every move), without the cost of making one."""
+    objects[0].cache.clear()
+    return objects
 
 
 def memory_floor(obs) -> float:
@@ -202,18 +210,21 @@ def main(argv=None) -> None:
     renderer = Renderer(model.render)
     print(f"GL renderer: {renderer_string()}")
     why_not = panda3d_path.available()
-    panda_ok = why_not is None
-    panda = panda3d_path.Worker() if panda_ok else None
-    if not panda_ok:
+    pandas = {}
+    if why_not is None:
+        pandas["panda3d"] = panda3d_path.Worker()
+        if "llvmpipe" in renderer_string():
+            pandas["panda3d, LP 0"] = panda3d_path.Worker(lp_threads="0")
+    else:
         print(f"panda3d path skipped: {why_not}")
     rng = np.random.default_rng(0)
 
     # -- full-scene scoring over the grid -----------------------------------------------------
-    names = ["reference", "fast", f"batch {BATCH}"] + (["panda3d"] if panda_ok else [])
+    names = ["reference", "fast", f"batch {BATCH}", *pandas]
     rows, focus = [], None
     for k, n_cam, size in itertools.product(args.objects, args.cameras, args.pixels):
         objects, cams, obs = setting(model, renderer, k, n_cam, size, rng)
-        paths = full_paths(model, renderer, objects, cams, obs, panda)
+        paths = full_paths(model, renderer, objects, cams, obs, pandas)
         r = measure(paths, args.repeats, args.seconds)
         row = [str(k), str(n_cam), f"{size}"]
         for name in names:
@@ -227,21 +238,20 @@ def main(argv=None) -> None:
 
     # -- incremental single-object moves and the memory floor, at the focus setting -----------
     k, n_cam, size, objects, cams, obs, full = focus
-    fast, ref = scorers(model, renderer, cams, obs, panda)
+    fast, ref = scorers(model, renderer, cams, obs, pandas)
     sampler = Sampler(model, fast, np.random.default_rng(1))
     state = sampler.make_trace(objects, NOISE)
     moves = move_sequence(model, objects, rng)
     move_parts = [fast.parts(m) for m in moves]
-    # Every evaluation gets the moved object anew, as a chain proposes a new object at every
-    # move: what sppl works out per object (its instance rows and screen rectangles) is part
-    # of the evaluation, as setting its node's matrix is part of Panda3D's.
+    # Every evaluation works the moved object out anew, as for the new object a chain proposes
+    # at every move: what sppl derives per object (its instance rows and screen rectangles)
+    # is part of the evaluation, as setting its node's matrix is part of Panda3D's.
     paths = {
         "incremental (fast)": (lambda: [fast.evaluate(anew(m), parent=state) for m in moves],
                                MOVES),
         "full (fast)": (lambda: [fast.evaluate(anew(m)) for m in moves], MOVES),
         "reference": (lambda: [ref.evaluate(m) for m in moves], MOVES),
-        **({"panda3d": (None, lambda seconds: panda.rate(move_parts, seconds))}
-           if panda is not None else {}),
+        **{name: remote(panda, move_parts) for name, panda in pandas.items()},
         "memory floor": (memory_floor(obs), 1),
     }
     r = measure(paths, args.repeats, args.seconds)
@@ -257,7 +267,7 @@ def main(argv=None) -> None:
           f"the fast path is {floor / full['fast']:.1f}x from it on full scenes, "
           f"{floor / full[f'batch {BATCH}']:.1f}x batched and "
           f"{r.ratio('memory floor', 'incremental (fast)')[0]:.1f}x incrementally.")
-    if panda is not None:
+    for panda in pandas.values():
         panda.close()
 
 

@@ -177,15 +177,30 @@ def _serve(conn) -> None:
 
 
 class Worker:
-    """A process that holds a PandaScorer and measures its evaluations per second."""
+    """A process that holds a PandaScorer and measures its evaluations per second.
 
-    def __init__(self) -> None:
+    ``lp_threads``, when given, is the worker's LP_NUM_THREADS: how many rasteriser threads
+    Mesa's llvmpipe runs (0: rasterise on the calling thread, as sppl does by default). None
+    leaves the environment as it is (llvmpipe's default: a thread per core)."""
+
+    def __init__(self, lp_threads: str | None = None) -> None:
         import multiprocessing
+        import os
 
         ctx = multiprocessing.get_context("spawn")
         self.conn, child = ctx.Pipe()
         self.process = ctx.Process(target=_serve, args=(child,), daemon=True)
-        self.process.start()
+        # A spawned process starts with the environment as it is now.
+        before = os.environ.get("LP_NUM_THREADS")
+        if lp_threads is not None:
+            os.environ["LP_NUM_THREADS"] = lp_threads
+        try:
+            self.process.start()
+        finally:
+            if before is None:
+                os.environ.pop("LP_NUM_THREADS", None)
+            else:
+                os.environ["LP_NUM_THREADS"] = before
 
     def setup(self, settings, cameras, observed) -> None:
         self.conn.send(("setup", settings, cameras, observed))
