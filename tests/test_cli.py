@@ -249,7 +249,7 @@ class cylinder {
     (tmp_path / "scene.json").write_text(json.dumps(scene))
     assert main(["simulate", str(model), "--cameras", str(tmp_path / "cameras.json"),
                  "--scene", str(tmp_path / "scene.json"), "--out", str(tmp_path / "obs")]) == 0
-    assert main(["sample", str(model), "--obs", str(tmp_path / "obs"), "--steps", "4000",
+    assert main(["sample", str(model), "--obs", str(tmp_path / "obs"), "--steps", "2000",
                  "--seed", "0", "--out", str(tmp_path / "run"), "-q"]) == 0
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert [o["class"] for o in summary["map"]["objects"]] == ["cylinder"]

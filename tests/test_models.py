@@ -113,10 +113,17 @@ def assert_tested(report, model, min_draws: int) -> None:
         assert draws >= min_draws, f"{name}: only {draws} thinned draws\n{report.table()}"
 
 
-# shapes_plus.scn's moves are shapes.scn's less merges and splits, and its fourth class is
-# blocks.scn's cylinder: its two minutes of prior recovery run with the slow tests.
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n == "shapes_plus"
-                                  else n for n in sorted(VIEWS)])
+# Under the prior a refit, merge or split runs its fit of up to 100 evaluations, so the models
+# that have them take minutes here: shapes.scn (three) and shapes_plus.scn (shapes.scn's moves
+# less merges and splits, and blocks.scn's cylinder) run with the slow tests. The default
+# tests check shapes.scn's every move by `sppl verify --quick` (tests/test_verify.py), and
+# refits, merges and splits each by a prior recovery and a Geweke test of their own
+# (tests/test_refit.py, tests/test_merge.py).
+SLOW_PRIOR_RECOVERY = {"shapes", "shapes_plus"}
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow)
+                                  if n in SLOW_PRIOR_RECOVERY else n for n in sorted(VIEWS)])
 def test_prior_recovery(name):
     """The model's sampler, with its noise steps widened to their priors' spread (they are
     tuned for a posterior; a random walk leaves the prior invariant at any scale), recovers
