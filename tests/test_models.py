@@ -114,12 +114,10 @@ def assert_tested(report, model, min_draws: int) -> None:
 
 
 # Under the prior a refit, merge or split runs its fit of up to 100 evaluations, so the models
-# that have them take minutes here: shapes.scn (three) and shapes_plus.scn (shapes.scn's moves
-# less merges and splits, and blocks.scn's cylinder) run with the slow tests. The default
-# tests check shapes.scn's every move by `sppl verify --quick` (tests/test_verify.py), and
-# refits, merges and splits each by a prior recovery and a Geweke test of their own
-# (tests/test_refit.py, tests/test_merge.py).
-SLOW_PRIOR_RECOVERY = {"shapes", "shapes_plus"}
+# that have them take minutes here. shapes.scn's (three minutes) is the default tests' check of
+# every move at once; shapes_plus.scn's moves are shapes.scn's less merges and splits, and its
+# fourth class is blocks.scn's cylinder: its two minutes run with the slow tests.
+SLOW_PRIOR_RECOVERY = {"shapes_plus"}
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow)
