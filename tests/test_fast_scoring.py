@@ -8,6 +8,7 @@ from the models' priors with fixed seeds, so every run checks the same hypothese
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -85,6 +86,32 @@ def test_full_scenes_agree_with_the_reference(setting):
     scenes = [(), truth] + [sample_objects(model, rng) for _ in range(12)]
     for objects in scenes:
         _assert_agree(fast.statistics(objects), ref.statistics(objects), ref, noise)
+
+
+def test_negative_observations_are_scored_on_both_paths(setting):
+    """Simulated observations go below zero (Gaussian noise around a dark colour or a near
+    surface), as the Geweke test's do: such a pixel is scored, not taken for a missing one.
+    Here every RGB value is shifted down by 0.7 and a block of depths below zero."""
+    model, renderer, obs, truth, noise = setting
+    frames = []
+    for frame in obs.frames:
+        frame = copy.copy(frame)
+        if frame.rgb is not None:
+            frame.rgb = frame.rgb - np.float32(0.7)
+        if frame.depth is not None:
+            frame.depth = frame.depth.copy()
+            frame.depth[20:30, 20:30] -= np.float32(9.0)
+        frames.append(frame)
+    shifted = Observations(obs.root, frames)
+    assert any(f.rgb is not None and (f.rgb < 0).mean() > 0.5 for f in frames)
+    fast, ref = Scorer(model, shifted, renderer), ReferenceScorer(model, shifted, renderer)
+    sampler = Sampler(model, fast, np.random.default_rng(3))
+    trace = sampler.make_trace(truth, noise)
+    _assert_agree(trace.stats, ref.statistics(truth), ref, noise)
+    rng = np.random.default_rng(4)
+    for _ in range(40):  # moves scored incrementally from the current state
+        trace = sampler.sweep(trace)
+        _assert_agree(trace.stats, ref.statistics(trace.objects), ref, noise)
 
 
 def test_a_batch_agrees_with_the_reference(setting):

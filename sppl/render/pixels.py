@@ -41,7 +41,11 @@ if TYPE_CHECKING:
 
 # An instance's row of floats: model matrix (16), normal matrix (9), colour (3), column-major.
 INSTANCE_FORMAT = "16f 9f 3f/i"
-MISSING = -1.0  # an observed value that marks "no term here" (observations are never negative)
+# An observed value that marks "no term here". Not -1 or any value an observation can take:
+# simulated images and depth maps (Gaussian noise around a dark colour or a near surface) go
+# below zero, and such a pixel must still be scored. The shader takes any value below
+# terms.frag's MISSING_BELOW for this mark.
+MISSING = -3.0e38
 TRIANGLES = moderngl.TRIANGLES
 
 

@@ -9,7 +9,10 @@ uniform float ambient;
 uniform bool ray_depth;
 uniform float depth_max;
 uniform vec3 background;
-uniform sampler2D observed;  // rgb (r < 0: no RGB term), depth in alpha (< 0: masked out)
+uniform sampler2D observed;  // rgb, depth in alpha; MISSING (pixels.py) marks no term there
+// Observations may be negative (simulated noise): only pixels.py's MISSING, -3e38, marks a
+// missing value.
+const float MISSING_BELOW = -1.0e37;
 
 in vec3 v_normal;
 in vec3 v_camera;
@@ -41,13 +44,13 @@ void main() {
     depth = min(depth, depth_max);
     vec4 o = texelFetch(observed, ivec2(gl_FragCoord.xy), 0);
     float image = 0.0;
-    if (o.r >= 0.0) {
+    if (o.r > MISSING_BELOW) {
         vec3 a = o.rgb - colour;
         vec3 b = o.rgb - background;
         image = dot(a, a) - dot(b, b);
     }
     float range = 0.0;
-    if (o.a >= 0.0) {
+    if (o.a > MISSING_BELOW) {
         float a = o.a - depth;
         float b = o.a - depth_max;
         range = a * a - b * b;
