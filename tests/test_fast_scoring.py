@@ -108,7 +108,6 @@ def test_negative_observations_are_scored_on_both_paths(setting):
     sampler = Sampler(model, fast, np.random.default_rng(3))
     trace = sampler.make_trace(truth, noise)
     _assert_agree(trace.stats, ref.statistics(truth), ref, noise)
-    rng = np.random.default_rng(4)
     for _ in range(40):  # moves scored incrementally from the current state
         trace = sampler.sweep(trace)
         _assert_agree(trace.stats, ref.statistics(trace.objects), ref, noise)
