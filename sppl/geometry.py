@@ -10,10 +10,12 @@ Unit shapes (before the part's matrix):
 - ``cylinder``: radius 1, z in [0, 1] (scale by radius, radius, height);
 - ``cone``: base radius 1 at z = 0, apex at z = 1 (scale by radius, radius, height);
 - ``sphere``: radius 1 centred at z = 1 (scale by the radius: it then rests on the ground);
-  its mesh (an icosphere) gives only its bounds: the renderers intersect each pixel's ray with
-  the exact sphere (``sppl.render.renderer.RAY_CAST``);
 - ``mesh:<absolute path>``: a mesh loaded from a file (OBJ, PLY, STL, GLB, ...), in its own
   coordinates, which the model file's scale and pose then act on (``load_mesh``).
+
+The round shapes' meshes (48-sided prisms and pyramids, an icosphere) give only their bounds
+and footprints: the renderers intersect each pixel's ray with the exact shape
+(``sppl.render.renderer.RAY_CAST``).
 """
 
 from __future__ import annotations
@@ -30,8 +32,8 @@ PRIMITIVES = ("box", "cylinder", "cone", "sphere")
 # A part whose primitive is MESH_PREFIX + an absolute path draws the mesh in that file.
 MESH_PREFIX = "mesh:"
 
-# Round shapes are footprinted (and cylinders and cones drawn) as polygons with this many
-# sides: enough that the polygon differs from the circle by under 0.2% of the radius.
+# Round shapes are footprinted as polygons with this many sides: enough that the polygon
+# differs from the circle by under 0.2% of the radius.
 ROUND_SECTIONS = 48
 
 

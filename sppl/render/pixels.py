@@ -34,7 +34,7 @@ from ..geometry import Part, linear_inverse
 from ..model import RenderSettings
 from .bounds import Rect, closed, union
 from .context import claim_state, gl_context
-from .renderer import FLIP_Y, RAY_CAST, VERTEX_FORMAT, _column_major, flat_vertices, programs
+from .renderer import FLIP_Y, RAY_CAST, VERTEX_FORMAT, _column_major, flat_vertices, program, shape
 
 if TYPE_CHECKING:
     from .drawlist import Drawn
@@ -92,24 +92,12 @@ class PixelScorer:
         self._unit = [c % units for c in range(len(self.cameras))]
         self._bound: list[int | None] = [None] * units  # which camera's texture each unit holds
         self._culling = False
-        # Each camera has its own pair of programs, whose uniforms are set here once: writing
-        # a camera's ten uniforms before each of its passes cost more than the draws.
-        self._programs = []
-        for c, camera in enumerate(self.cameras):
-            pair = programs(ctx, "terms.vert", "terms.frag")
-            for sphere, program in pair.items():
-                program["light"].value = tuple(light / np.linalg.norm(light))
-                program["ambient"].value = float(settings.ambient)
-                program["background"].value = tuple(float(c) for c in settings.background)
-                program["observed"].value = self._unit[c]
-                program["view"].write(_column_major(camera.w2c))
-                program["projection"].write(_column_major(FLIP_Y @ camera.projection()))
-                program["ray_depth"].value = camera.depth_type == "ray"
-                program["depth_max"].value = float(camera.depth_max)
-                if sphere:
-                    program["intrinsics"].value = (camera.fx, camera.fy, camera.cx, camera.cy)
-                    program["near"].value = float(camera.near)
-            self._programs.append(pair)
+        # Each camera has its own programs (one per kind of shape, made when first drawn),
+        # whose uniforms are set then, once: writing a camera's ten uniforms before each of
+        # its passes cost more than the draws.
+        self._light = tuple(light / np.linalg.norm(light))
+        self._settings = settings
+        self._programs: list[dict[str | None, moderngl.Program]] = [{} for _ in self.cameras]
         self._meshes = {}
         limit = ctx.info["GL_MAX_TEXTURE_SIZE"]
         self.observed = []
@@ -220,7 +208,7 @@ class PixelScorer:
         for slot in self._slots:
             for obj in [*slot.vaos.values(), *slot.buffers.values()]:
                 obj.release()
-        programs_ = [p for pair in self._programs for p in pair.values()]
+        programs_ = [p for kinds in self._programs for p in kinds.values()]
         for obj in [*self._meshes.values(), *self.observed, *programs_]:
             obj.release()
         self._targets, self._slots, self._meshes, self.observed = [], [], {}, []
@@ -290,9 +278,8 @@ class PixelScorer:
         buffer = slot.buffers.get(primitive)
         if buffer is None:
             buffer = slot.buffers[primitive] = self.ctx.buffer(reserve=max(nbytes, 1024))
-            sphere = primitive in RAY_CAST
-            slot.vaos[primitive] = self.ctx.vertex_array(self._programs[c][sphere], [
-                (self._mesh(primitive), *VERTEX_FORMAT[sphere]),
+            slot.vaos[primitive] = self.ctx.vertex_array(self._program(c, shape(primitive)), [
+                (self._mesh(primitive), *VERTEX_FORMAT[primitive in RAY_CAST]),
                 (buffer, INSTANCE_FORMAT, "i_model", "i_normal", "i_colour"),
             ])
         elif buffer.size < nbytes:
@@ -300,6 +287,25 @@ class PixelScorer:
         entry = slot.entries[primitive] = (slot.vaos[primitive], buffer, buffer.size,
                                            closed(primitive))
         return entry
+
+    def _program(self, c: int, kind: str | None) -> moderngl.Program:
+        """Camera c's program for a kind of shape (None: meshes), its uniforms set."""
+        found = self._programs[c].get(kind)
+        if found is None:
+            camera, settings = self.cameras[c], self._settings
+            found = self._programs[c][kind] = program(self.ctx, "terms.vert", "terms.frag", kind)
+            found["light"].value = self._light
+            found["ambient"].value = float(settings.ambient)
+            found["background"].value = tuple(float(x) for x in settings.background)
+            found["observed"].value = self._unit[c]
+            found["view"].write(_column_major(camera.w2c))
+            found["projection"].write(_column_major(FLIP_Y @ camera.projection()))
+            found["ray_depth"].value = camera.depth_type == "ray"
+            found["depth_max"].value = float(camera.depth_max)
+            if kind is not None:
+                found["intrinsics"].value = (camera.fx, camera.fy, camera.cx, camera.cy)
+                found["near"].value = float(camera.near)
+        return found
 
     def _mesh(self, primitive: str) -> moderngl.Buffer:
         vbo = self._meshes.get(primitive)

@@ -2,8 +2,9 @@
 
 It shares only the unit meshes and the camera with the OpenGL renderer, and derives everything
 else independently (normals from the posed triangles' edges, depth from the hit distance), so
-that it can serve as the oracle the fast path is tested against. Spheres, which the renderer
-ray-casts exactly, are intersected exactly here too, in double precision (``_sphere_hits``).
+that it can serve as the oracle the fast path is tested against. Spheres, cylinders and cones,
+which the renderer ray-casts exactly, are intersected exactly here too, in double precision
+(``_round_hits``), from a formulation of their own.
 Meant for tiny images.
 """
 
@@ -19,6 +20,8 @@ from ..model import RenderSettings
 
 # Rays per batch: bounds the (rays x triangles) temporaries to a few tens of megabytes.
 BATCH = 256
+# Primitives intersected exactly, as the GL renderer ray-casts them.
+ROUND = ("sphere", "cylinder", "cone")
 
 
 def raycast(
@@ -42,10 +45,10 @@ def raycast(
     colour_of = lambda part, normals: np.asarray(part.colour, dtype=float)[None, :] * (  # noqa: E731
         settings.ambient + (1.0 - settings.ambient) * np.maximum(normals @ light, 0.0))[:, None]
     for part in parts:
-        if part.primitive == "sphere":
+        if part.primitive in ROUND:
             # The GL renderer clips at its near plane, a plane of constant z: a ray's hits
             # count from the z-depth ``near`` on.
-            t, normals = _sphere_hits(part, origin, directions, camera.near / (directions @ forward))
+            t, normals = _round_hits(part, origin, directions, camera.near / (directions @ forward))
             if normals is None:
                 continue
             closer = t < nearest
@@ -71,34 +74,71 @@ def raycast(
     return rgb.reshape(h, w, 3).astype("f4"), depth.reshape(h, w).astype("f4")
 
 
-def _sphere_hits(part: Part, origin, directions, start):
-    """The distance along each unit ray to the part's sphere (inf for a miss), counting only
-    hits at least ``start`` (per ray) along it, and the outward unit normals (N, 3) there;
-    (None, None) for a part with no volume. The unit sphere has radius 1 and centre (0, 0, 1)."""
+def _round_hits(part: Part, origin, directions, start):
+    """The distance along each unit ray to the part's round shape (inf for a miss), counting
+    only hits at least ``start`` (per ray) along it, and the outward unit normals (N, 3) there;
+    (None, None) for a part with no volume. The unit shapes: a sphere of radius 1 centred at
+    (0, 0, 1); a cylinder of radius 1 about the z axis for z in [0, 1], with its caps; a cone
+    of base radius 1 at z = 0 and apex (0, 0, 1), with its base."""
     matrix = np.asarray(part.matrix, dtype=float)
     linear = matrix[:3, :3]
     if abs(np.linalg.det(linear)) < 1e-12:
         return None, None
     unit_from_world = np.linalg.inv(linear)
-    o = unit_from_world @ (origin - matrix[:3, 3]) - (0.0, 0.0, 1.0)
+    o = unit_from_world @ (origin - matrix[:3, 3])  # the camera in unit coordinates
     d = directions @ unit_from_world.T
-    # |o + t d|^2 = 1, a quadratic in t.
-    a = np.einsum("nk,nk->n", d, d)
-    b = d @ o
-    c = o @ o - 1.0
-    discriminant = b * b - a * c
-    t = np.full(len(d), np.inf)
-    hit = discriminant >= 0.0
-    root = np.sqrt(discriminant[hit])
-    near, far = (-b[hit] - root) / a[hit], (-b[hit] + root) / a[hit]
-    first = np.where(near > start[hit], near, np.where(far > start[hit], far, np.inf))
-    t[hit] = first
-    unit_normals = np.tile((0.0, 0.0, 1.0), (len(d), 1))
-    found = np.isfinite(t)
-    unit_normals[found] = o + t[found, None] * d[found]
+    candidates = []  # (t, the unit shape's normal there), t NaN where there is no such hit
+    if part.primitive == "sphere":
+        # |o + t d - (0, 0, 1)|^2 = 1
+        centred = o - (0.0, 0.0, 1.0)
+        for t in _roots(np.einsum("nk,nk->n", d, d), d @ centred, centred @ centred - 1.0):
+            candidates.append((t, centred + t[:, None] * d))
+    else:
+        x, y, z = o
+        dx, dy, dz = d.T
+        if part.primitive == "cylinder":
+            # x^2 + y^2 = 1 for z in [0, 1], then the planes z = 0 and z = 1 inside radius 1.
+            side = _roots(dx * dx + dy * dy, x * dx + y * dy, x * x + y * y - 1.0)
+            caps = ((0.0, -1.0), (1.0, 1.0))
+        else:
+            # x^2 + y^2 = (1 - z)^2 for z in [0, 1] (the lower nappe), then the base.
+            w = 1.0 - z
+            side = _roots(dx * dx + dy * dy - dz * dz, x * dx + y * dy + w * dz,
+                          x * x + y * y - w * w)
+            caps = ((0.0, -1.0),)
+        for t in side:
+            point = o + t[:, None] * d
+            t = np.where((point[:, 2] >= 0.0) & (point[:, 2] <= 1.0), t, np.nan)
+            rise = np.zeros(len(d)) if part.primitive == "cylinder" else 1.0 - point[:, 2]
+            candidates.append((t, np.column_stack([point[:, 0], point[:, 1], rise])))
+        for height, facing in caps:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (height - z) / dz
+            point = o + np.nan_to_num(t, posinf=0.0, neginf=0.0)[:, None] * d
+            t = np.where(point[:, 0] ** 2 + point[:, 1] ** 2 <= 1.0, t, np.nan)
+            candidates.append((t, np.tile((0.0, 0.0, facing), (len(d), 1))))
+    times = np.stack([t for t, _ in candidates], axis=1)
+    times = np.where(np.isfinite(times) & (times > start[:, None]), times, np.inf)
+    nearest = np.argmin(times, axis=1)
+    rows = np.arange(len(d))
+    t = times[rows, nearest]
+    unit_normals = np.stack([n for _, n in candidates], axis=1)[rows, nearest]
+    unit_normals[~np.isfinite(t)] = (0.0, 0.0, 1.0)
+    # A cone's apex has no normal; the GL renderer lights it as the axis's tip.
+    unit_normals[np.all(unit_normals == 0.0, axis=1)] = (0.0, 0.0, 1.0)
     normals = unit_normals @ unit_from_world  # the inverse-transpose applied to each normal
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     return t, normals
+
+
+def _roots(a, b, c):
+    """Both roots of a t^2 + 2 b t + c = 0 per ray (NaN where there are none); where a = 0,
+    the one root of the linear equation, twice."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        root = np.sqrt(b * b - a * c)
+        linear = np.where(a == 0.0, -c / (2.0 * b), np.nan)
+        return (np.where(a != 0.0, (-b - root) / a, linear),
+                np.where(a != 0.0, (-b + root) / a, linear))
 
 
 def _posed_triangles(part: Part) -> tuple[np.ndarray, np.ndarray]:

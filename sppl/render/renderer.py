@@ -4,11 +4,11 @@ Each primitive's unit mesh lives on the GPU once; a part is drawn as that mesh u
 matrix and colour, so a new hypothesis costs a few uniform writes, not a mesh upload. Images come
 back as float32 arrays in the camera's conventions (see ``sppl.camera``).
 
-Spheres are the exception (``RAY_CAST``): a tessellated sphere needs a thousand triangles to look
-round, and on a software rasteriser their setup costs more than all the other shapes' pixels.
-A sphere is drawn as an inside-out bounding box, and the fragment shader intersects each
-pixel's ray with the exact (affinely posed) sphere (``shaders/sphere.glsl``), which is both
-cheaper and exact.
+Round shapes are the exception (``RAY_CAST``): a tessellated sphere needs a thousand triangles
+to look round, and on a software rasteriser the setup of a cone's or a cylinder's hundred or two
+costs more than their pixels. Each is drawn as an inside-out bounding box, and the fragment
+shader intersects each pixel's ray with the exact (affinely posed) sphere, cylinder or cone
+(``shaders/ray_cast.glsl``), which is both cheaper and exact.
 """
 
 from __future__ import annotations
@@ -33,30 +33,39 @@ from .context import claim_state, gl_context
 FLIP_Y = np.diag([1.0, -1.0, 1.0, 1.0])
 
 
-# Primitives whose surface the fragment shader ray-casts exactly over a proxy mesh.
-RAY_CAST = frozenset({"sphere"})
+# Primitives whose surface the fragment shader ray-casts exactly over a proxy mesh, each with
+# the point of its unit shape that ray_cast.glsl takes coordinates from (the sphere's centre).
+RAY_CAST = {"sphere": (0.0, 0.0, 1.0), "cylinder": (0.0, 0.0, 0.0), "cone": (0.0, 0.0, 0.0)}
 
 
 # The vertex rows' layout as each program reads it: a proxy's normals are not used.
 VERTEX_FORMAT = {False: ("3f 3f", "in_position", "in_normal"), True: ("3f 3x4", "in_position")}
 
 
-def _shader(name: str, sphere: bool = False) -> str:
-    """A shader's source; with ``sphere``, its variant that ray-casts spheres."""
+def shape(primitive: str) -> str | None:
+    """The round shape a primitive's program ray-casts, or None for a rasterised mesh."""
+    return primitive if primitive in RAY_CAST else None
+
+
+def _shader(name: str, shape: str | None = None) -> str:
+    """A shader's source; with a ``shape`` of RAY_CAST, its variant that ray-casts it."""
     text = resources.files(__package__).joinpath("shaders", name).read_text(encoding="utf-8")
-    if not sphere:
+    if shape is None:
         return text
     version, _, body = text.partition("\n")
-    extra = _shader("sphere.glsl") if name.endswith(".frag") else ""
-    return f"{version}\n#define SPHERE\n{extra}\n{body}"
+    extra = _shader("ray_cast.glsl") if name.endswith(".frag") else ""
+    centre = ", ".join(f"{x:.1f}" for x in RAY_CAST[shape])
+    return (f"{version}\n#define RAY_CAST\n#define HIT {shape}_hit\n"
+            f"#define CENTRE vec3({centre})\n{extra}\n{body}")
 
 
-def programs(ctx: moderngl.Context, vertex: str, fragment: str) -> dict[bool, moderngl.Program]:
-    """The mesh program (False) and the sphere program (True) of a pair of shaders."""
+def program(ctx: moderngl.Context, vertex: str, fragment: str,
+            shape: str | None = None) -> moderngl.Program:
+    """The program of a pair of shaders that draws meshes (``shape`` None) or ray-casts a
+    round shape."""
     try:
-        return {sphere: ctx.program(vertex_shader=_shader(vertex, sphere),
-                                    fragment_shader=_shader(fragment, sphere))
-                for sphere in (False, True)}
+        return ctx.program(vertex_shader=_shader(vertex, shape),
+                           fragment_shader=_shader(fragment, shape))
     except moderngl.Error as error:
         raise RenderError(f"the shaders {vertex} and {fragment} did not compile on this GL "
                           f"driver: {error}") from None
@@ -85,13 +94,18 @@ def flat_vertices(primitive: str) -> np.ndarray:
 
 
 def _proxy(primitive: str):
-    """The unit shape's bounding box turned inside out: its far faces are the front ones, so
-    that back-face culling keeps them, and they cover the shape's pixels even for a camera
-    inside the box."""
+    """A convex solid around the unit shape, turned inside out: its far faces are the front
+    ones, so that back-face culling keeps them, and they cover the shape's pixels even for a
+    camera inside it. The bounding box; for a cone, the square pyramid around it, which seen
+    from the side covers half the box's pixels (each costs a ray test)."""
     lo, hi = unit_mesh(primitive).bounds
-    box = trimesh.creation.box(bounds=(lo, hi))
-    box.invert()
-    return box
+    if primitive == "cone":
+        corners = [(x, y, lo[2]) for x in (lo[0], hi[0]) for y in (lo[1], hi[1])]
+        solid = trimesh.Trimesh(vertices=[*corners, (0.0, 0.0, hi[2])]).convex_hull
+    else:
+        solid = trimesh.creation.box(bounds=(lo, hi))
+    solid.invert()
+    return solid
 
 
 def _facets(mesh) -> np.ndarray:
@@ -129,20 +143,17 @@ class Renderer:
         if not np.all(np.isfinite(light)) or np.linalg.norm(light) == 0.0:
             raise RenderError(f"the light direction {tuple(light)} is not a nonzero vector")
         self.ctx = gl_context()
-        self._programs = programs(self.ctx, "scene.vert", "scene.frag")
-        self.program = self._programs[False]
-        for program in self._programs.values():
-            program["light"].value = tuple(light / np.linalg.norm(light))
-            program["ambient"].value = float(self.settings.ambient)
+        self._light = tuple(light / np.linalg.norm(light))
+        # Programs and meshes are made the first time a part needs them.
+        self._programs: dict[str | None, moderngl.Program] = {}
         self._buffers: dict[str, moderngl.Buffer] = {}
         self._vaos: dict[str, moderngl.VertexArray] = {}
-        for primitive in PRIMITIVES:
-            self._upload(primitive)
         self._targets: dict[tuple[int, int], _Target] = {}
+        self._released = False
 
     def render(self, parts: Iterable[Part], camera: Camera) -> tuple[np.ndarray, np.ndarray]:
         """RGB (H, W, 3) in [0, 1] and depth (H, W) in metres of ``camera.depth_type``."""
-        if self.program is None:
+        if self._released:
             raise RenderError("this renderer has been released")
         target = self._target(camera.width, camera.height)
         # The context is shared with other users in the process; set every state this pass
@@ -157,15 +168,16 @@ class Renderer:
         target.scene.use()
         view = _column_major(camera.w2c)
         projection = _column_major(FLIP_Y @ camera.projection())
-        for sphere, program in self._programs.items():
+        parts = list(parts)
+        for kind in {shape(p.primitive) for p in parts}:
+            program = self._program(kind)
             program["view"].write(view)
             program["projection"].write(projection)
             program["ray_depth"].value = camera.depth_type == "ray"
             program["depth_max"].value = float(camera.depth_max)
-            if sphere:
+            if kind is not None:
                 program["intrinsics"].value = (camera.fx, camera.fy, camera.cx, camera.cy)
                 program["near"].value = float(camera.near)
-        parts = list(parts)
         # Back faces of closed parts are hidden behind their front faces, so they are not
         # drawn (unless the camera may be inside a part). Drawing them anyway let a few
         # silhouette pixels show a back face's shade. The fast path (pixels.py) follows the
@@ -201,7 +213,7 @@ class Renderer:
         for obj in [*self._vaos.values(), *self._buffers.values(), *self._programs.values()]:
             obj.release()
         self._targets, self._vaos, self._buffers, self._programs = {}, {}, {}, {}
-        self.program = None
+        self._released = True
 
     def _draw(self, part: Part) -> None:
         vao = self._vaos.get(part.primitive)
@@ -210,7 +222,7 @@ class Renderer:
         inverse = linear_inverse(np.asarray(part.matrix, dtype=float))
         if inverse is None:
             return  # a part scaled to zero thickness encloses nothing; the ray caster agrees
-        program = self._programs[part.primitive in RAY_CAST]
+        program = self._programs[shape(part.primitive)]
         program["model"].write(_column_major(part.matrix))
         # The normal matrix is the inverse's transpose: column-major, the inverse row by row.
         program["normal_matrix"].write(np.array(inverse, dtype="f4").tobytes())
@@ -230,9 +242,17 @@ class Renderer:
         buffer = self.ctx.buffer(vertices.tobytes())
         self._buffers[primitive] = buffer
         self._vaos[primitive] = self.ctx.vertex_array(
-            self._programs[primitive in RAY_CAST], [(buffer, *VERTEX_FORMAT[primitive in RAY_CAST])]
+            self._program(shape(primitive)), [(buffer, *VERTEX_FORMAT[primitive in RAY_CAST])]
         )
         return self._vaos[primitive]
+
+    def _program(self, kind: str | None) -> moderngl.Program:
+        found = self._programs.get(kind)
+        if found is None:
+            found = self._programs[kind] = program(self.ctx, "scene.vert", "scene.frag", kind)
+            found["light"].value = self._light
+            found["ambient"].value = float(self.settings.ambient)
+        return found
 
     def _target(self, width: int, height: int) -> _Target:
         key = (int(width), int(height))

@@ -8,7 +8,7 @@ uniform float depth_max;
 
 in vec3 v_normal;
 in vec3 v_camera;
-#ifdef SPHERE
+#ifdef RAY_CAST
 uniform mat3 normal_matrix;
 uniform mat4 projection;
 flat in vec3 v_origin;
@@ -21,11 +21,11 @@ layout(location = 1) out float out_depth;
 void main() {
     vec3 normal = v_normal;
     vec3 camera_point = v_camera;
-#ifdef SPHERE
+#ifdef RAY_CAST
     vec3 ray = pixel_ray();
     float t;
     vec3 unit_normal;
-    if (!sphere_hit(v_origin, v_unit_from_camera, ray, t, unit_normal)) discard;
+    if (!HIT(v_origin, v_unit_from_camera, ray, t, unit_normal)) discard;
     camera_point = t * ray;
     normal = normal_matrix * unit_normal;
     gl_FragDepth = window_depth(projection, camera_point);

@@ -17,7 +17,7 @@ const float MISSING_BELOW = -1.0e37;
 in vec3 v_normal;
 in vec3 v_camera;
 flat in vec3 v_colour;
-#ifdef SPHERE
+#ifdef RAY_CAST
 uniform mat4 projection;
 flat in vec3 v_origin;
 flat in mat3 v_unit_from_camera;
@@ -29,11 +29,11 @@ layout(location = 0) out vec2 out_terms;  // (image term, depth term)
 void main() {
     vec3 normal = v_normal;
     vec3 camera_point = v_camera;
-#ifdef SPHERE
+#ifdef RAY_CAST
     vec3 ray = pixel_ray();
     float t;
     vec3 unit_normal;
-    if (!sphere_hit(v_origin, v_unit_from_camera, ray, t, unit_normal)) discard;
+    if (!HIT(v_origin, v_unit_from_camera, ray, t, unit_normal)) discard;
     camera_point = t * ray;
     normal = v_normal_matrix * unit_normal;
     gl_FragDepth = window_depth(projection, camera_point);

@@ -1,0 +1,121 @@
+// Round primitives are drawn exactly: a part's unit shape under its affine map is an ellipsoid,
+// or an elliptic cylinder or cone, and each pixel's ray is intersected with it here instead of
+// rasterising a tessellation. The vertex shader draws an inside-out bounding box (its far
+// faces) to reach every pixel the shape may cover and passes, per part, the camera's origin
+// and the camera-to-unit linear map in the unit shape's coordinates (less CENTRE, below).
+// Compiled with HIT defined as one of the *_hit functions.
+uniform vec4 intrinsics;  // fx, fy, cx, cy in pixels
+uniform float near;
+
+// The ray through this fragment's pixel centre, (u, v) = gl_FragCoord.xy (the projection's y
+// flip makes window rows image rows), in camera coordinates scaled so that its z is -1: the
+// ray's parameter is then the z-depth of its points.
+vec3 pixel_ray() {
+    return vec3((gl_FragCoord.x - intrinsics.z) / intrinsics.x,
+                -(gl_FragCoord.y - intrinsics.w) / intrinsics.y, -1.0);
+}
+
+// Each *_hit gives the nearest intersection beyond the near plane, as the ray's parameter t
+// (its z-depth) and the unit shape's outward normal there; false when the ray misses. A camera
+// inside the shape, or one whose near plane cuts it, sees the far side, as it sees a mesh's
+// back faces.
+
+// The unit sphere: radius 1, centre (0, 0, 1); origin is relative to the centre.
+bool sphere_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, out float t, out vec3 normal) {
+    vec3 d = unit_from_camera * ray;
+    float a = dot(d, d);
+    // Through the point of the ray closest to the centre, which keeps the discriminant accurate
+    // in single precision far from the sphere.
+    float middle = -dot(origin, d) / a;
+    vec3 closest = origin + middle * d;
+    float discriminant = 1.0 - dot(closest, closest);
+    if (discriminant < 0.0) return false;
+    float half_chord = sqrt(discriminant / a);
+    t = middle - half_chord;
+    if (t <= near) t = middle + half_chord;
+    if (t <= near) return false;
+    normal = origin + t * d;
+    return true;
+}
+
+// Keeps a candidate hit at s along the ray from its point p0 (t = middle + s) if it lies beyond
+// the near plane and before the best so far.
+void keep(float middle, float s, vec3 n, inout float best, inout vec3 normal) {
+    float t = middle + s;
+    if (t > near && t < best) {
+        best = t;
+        normal = n;
+    }
+}
+
+// The roots of a s^2 + 2 b s + c = 0 in the stable form; false when there are none.
+bool roots(float a, float b, float c, out float s0, out float s1) {
+    float discriminant = b * b - a * c;
+    if (discriminant < 0.0) return false;
+    float q = -(b + (b < 0.0 ? -1.0 : 1.0) * sqrt(discriminant));
+    if (q == 0.0) return false;  // a = b = c = 0 on a degenerate ray, or a tangent at s = 0
+    s0 = c / q;
+    s1 = a != 0.0 ? q / a : s0;  // a = 0: a ray along the cone's side meets it once
+    return true;
+}
+
+// The unit cylinder: radius 1 about the z axis, z in [0, 1], with both caps.
+bool cylinder_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, out float t, out vec3 normal) {
+    vec3 d = unit_from_camera * ray;
+    // Solved from the ray's point nearest the shape's middle, where every coefficient is of
+    // the shape's size: accurate in single precision however far away the camera is.
+    float middle = -dot(origin - vec3(0.0, 0.0, 0.5), d) / dot(d, d);
+    vec3 p0 = origin + middle * d;
+    float best = 3.0e38;
+    float s0, s1;
+    if (roots(dot(d.xy, d.xy), dot(p0.xy, d.xy), dot(p0.xy, p0.xy) - 1.0, s0, s1)) {
+        vec3 p = p0 + s0 * d;
+        if (p.z >= 0.0 && p.z <= 1.0) keep(middle, s0, vec3(p.xy, 0.0), best, normal);
+        p = p0 + s1 * d;
+        if (p.z >= 0.0 && p.z <= 1.0) keep(middle, s1, vec3(p.xy, 0.0), best, normal);
+    }
+    if (d.z != 0.0) {
+        float s = -p0.z / d.z;
+        vec2 p = p0.xy + s * d.xy;
+        if (dot(p, p) <= 1.0) keep(middle, s, vec3(0.0, 0.0, -1.0), best, normal);
+        s = (1.0 - p0.z) / d.z;
+        p = p0.xy + s * d.xy;
+        if (dot(p, p) <= 1.0) keep(middle, s, vec3(0.0, 0.0, 1.0), best, normal);
+    }
+    t = best;
+    return best < 3.0e38;
+}
+
+// The unit cone: base radius 1 at z = 0, apex at z = 1, with its base.
+bool cone_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, out float t, out vec3 normal) {
+    vec3 d = unit_from_camera * ray;
+    float middle = -dot(origin - vec3(0.0, 0.0, 0.5), d) / dot(d, d);
+    vec3 p0 = origin + middle * d;
+    float best = 3.0e38;
+    float s0, s1;
+    // x^2 + y^2 = (1 - z)^2 along the ray; the z range keeps the upper nappe's hits out.
+    float w = 1.0 - p0.z;
+    if (roots(dot(d.xy, d.xy) - d.z * d.z, dot(p0.xy, d.xy) + w * d.z,
+              dot(p0.xy, p0.xy) - w * w, s0, s1)) {
+        vec3 p = p0 + s0 * d;
+        if (p.z >= 0.0 && p.z <= 1.0) keep(middle, s0, vec3(p.xy, 1.0 - p.z), best, normal);
+        p = p0 + s1 * d;
+        if (p.z >= 0.0 && p.z <= 1.0) keep(middle, s1, vec3(p.xy, 1.0 - p.z), best, normal);
+    }
+    if (d.z != 0.0) {
+        float s = -p0.z / d.z;
+        vec2 p = p0.xy + s * d.xy;
+        if (dot(p, p) <= 1.0) keep(middle, s, vec3(0.0, 0.0, -1.0), best, normal);
+    }
+    t = best;
+    if (best == 3.0e38) return false;
+    // The apex has no normal: light it as the tip of the axis.
+    if (normal == vec3(0.0)) normal = vec3(0.0, 0.0, 1.0);
+    return true;
+}
+
+// gl_FragDepth of a camera-space point, as the rasteriser would interpolate it.
+float window_depth(mat4 projection, vec3 camera_point) {
+    vec4 clip = projection * vec4(camera_point, 1.0);
+    return 0.5 * (clip.z / clip.w) + 0.5;
+}
