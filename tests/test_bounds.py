@@ -83,6 +83,35 @@ def test_the_cases_the_rectangles_must_tell_apart():
     assert cache.of_parts([ahead, aside]).inside == (False,)
 
 
+def test_the_depth_pre_check_never_hides_an_inside_camera():
+    """Cameras within a few margins of a sheared part's box, most looking at it: the inside
+    test's shortcut (no corner nearer than 3 margins) says outside only where the solve
+    does. A shortcut at 1 margin instead of 3 fails here."""
+    rng = np.random.default_rng(12)
+    seen = set()
+    for _ in range(300):
+        part = _part(rng, spread=0.2)
+        shear = np.eye(4)
+        shear[0, 1], shear[1, 2] = rng.normal(size=2) * 0.5
+        part = Part(part.primitive, part.matrix @ shear, part.colour)
+        corners = part.matrix[:3] @ unit_corners(part.primitive)
+        centre = corners.mean(axis=1)
+        # A corner (where the widened box reaches furthest out) or a point of an edge, pushed
+        # out along the direction from the centre.
+        ends = rng.choice(8, size=2, replace=False)
+        point = corners[:, ends] @ ((1.0, 0.0) if rng.random() < 0.5 else rng.dirichlet((1, 1)))
+        away = (point - centre) / max(np.linalg.norm(point - centre), 1e-9)
+        for offset in rng.uniform(0.0, 4.0 * INSIDE_MARGIN, 3):
+            eye = point + offset * away
+            target = centre if rng.random() < 0.8 else eye + rng.normal(size=3)
+            camera = Camera("c", 32, 24, 30.0, 30.0, 16.0, 12.0, look_at(eye, target),
+                            depth_max=10.0)
+            (inside,) = DrawCache([CameraBounds(camera)]).of_parts([part]).inside
+            assert inside == _contains_by_solve(part, eye)
+            seen.add(inside)
+    assert seen == {True, False}
+
+
 def test_the_box_pre_check_never_hides_an_inside_camera():
     """Points near sheared, thin and tilted parts: the pre-check says outside only where the
     solve does."""

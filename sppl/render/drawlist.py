@@ -47,17 +47,23 @@ class DrawCache:
         if not parts:
             return Drawn({}, (None,) * n, (False,) * n)
         corners = world_corners(parts)
-        return Drawn(instance_rows(parts), self.rects(corners), self._inside(parts, corners))
+        rects, nearest = self._project_corners(corners)
+        return Drawn(instance_rows(parts), rects, self._inside(parts, corners, nearest))
 
     def rects(self, corners: np.ndarray) -> tuple[Rect | None, ...]:
-        """Per camera, ``CameraBounds.rect_of(corners)``, for all cameras from one product.
-        An object has a few dozen corners: past the product, plain floats are quicker than
-        numpy's calls on arrays this small."""
+        """Per camera, ``CameraBounds.rect_of(corners)``, for all cameras from one product."""
+        return self._project_corners(corners)[0]
+
+    def _project_corners(self, corners: np.ndarray) -> tuple[tuple, list[float]]:
+        """``rects``, and per camera the smallest z-depth of the corners. An object has a few
+        dozen corners: past the product, plain floats are quicker than numpy's calls on
+        arrays this small."""
         rows = (self._project @ corners).tolist()
-        out = []
+        out, nearest = [], []
         for c, b in enumerate(self.bounds):
             us, vs, ws = rows[3 * c], rows[3 * c + 1], rows[3 * c + 2]
-            if min(ws) <= b.near or not math.isfinite(sum(us) + sum(vs) + sum(ws)):
+            nearest.append(min(ws))
+            if nearest[-1] <= b.near or not math.isfinite(sum(us) + sum(vs) + sum(ws)):
                 out.append(b.full)  # reaching behind the camera (or degenerate)
                 continue
             u = [a / w for a, w in zip(us, ws)]
@@ -65,18 +71,28 @@ class DrawCache:
             c0, c1 = max(math.floor(min(u)) - MARGIN, 0), min(math.ceil(max(u)) + MARGIN, b.width)
             r0, r1 = max(math.floor(min(v)) - MARGIN, 0), min(math.ceil(max(v)) + MARGIN, b.height)
             out.append(None if c0 >= c1 or r0 >= r1 else (r0, r1, c0, c1))
-        return tuple(out)
+        return tuple(out), nearest
 
-    def _inside(self, parts: Sequence[Part], corners: np.ndarray) -> tuple[bool, ...]:
-        """Per camera, whether it may be inside one of the parts (``contains``), asking
-        ``contains`` only of the parts whose box the camera is near (``near_box``)."""
+    def _inside(self, parts: Sequence[Part], corners: np.ndarray,
+                nearest: Sequence[float]) -> tuple[bool, ...]:
+        """Per camera, whether it may be inside one of the parts (``contains``). ``contains``
+        widens a part's box by INSIDE_MARGIN along each of its axes, which moves no point more
+        than 3 margins, so a camera whose nearest corner is deeper than that is outside every
+        part (a box's smallest depth is at a corner): the usual case, decided here without
+        looking at the parts. The others ask ``contains`` of the parts whose box they are
+        near (``near_box``)."""
         reach = 3.0 * INSIDE_MARGIN
-        xyz = corners[:3].tolist()
-        boxes = [[(min(axis[8 * i : 8 * i + 8]) - reach, max(axis[8 * i : 8 * i + 8]) + reach)
-                  for axis in xyz] for i in range(len(parts))]
-        out = []
-        for b, position in zip(self.bounds, self._positions):
+        out = [False] * len(self.bounds)
+        boxes = None
+        for c, (b, position) in enumerate(zip(self.bounds, self._positions)):
+            if nearest[c] > reach:
+                continue
+            if boxes is None:
+                xyz = corners[:3].tolist()
+                boxes = [[(min(axis[8 * i : 8 * i + 8]) - reach,
+                           max(axis[8 * i : 8 * i + 8]) + reach) for axis in xyz]
+                         for i in range(len(parts))]
             near = [p for p, box in zip(parts, boxes)
                     if all(lo <= x <= hi for x, (lo, hi) in zip(position, box))]
-            out.append(bool(near) and any(contains(p, b.position) for p in near))
+            out[c] = bool(near) and any(contains(p, b.position) for p in near)
         return tuple(out)
