@@ -59,29 +59,37 @@ bool roots(float a, float b, float c, out float s0, out float s1) {
     return true;
 }
 
+// The ray's point nearest the middle of the unit box (z in [0, 1]) and its parameter there.
+// A cylinder's or cone's hits are solved from it, where every coefficient is of the shape's
+// size: accurate in single precision however far away the camera is.
+vec3 near_middle(vec3 origin, vec3 d, out float middle) {
+    middle = -dot(origin - vec3(0.0, 0.0, 0.5), d) / dot(d, d);
+    return origin + middle * d;
+}
+
+// Keeps the ray's hit with the disc of radius 1 in the plane z = height.
+void cap(float middle, vec3 p0, vec3 d, float height, inout float best, inout vec3 normal) {
+    if (d.z == 0.0) return;
+    float s = (height - p0.z) / d.z;
+    vec2 p = p0.xy + s * d.xy;
+    if (dot(p, p) <= 1.0) keep(middle, s, vec3(0.0, 0.0, height > 0.5 ? 1.0 : -1.0), best, normal);
+}
+
 // The unit cylinder: radius 1 about the z axis, z in [0, 1], with both caps.
 bool cylinder_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, out float t, out vec3 normal) {
     vec3 d = unit_from_camera * ray;
-    // Solved from the ray's point nearest the shape's middle, where every coefficient is of
-    // the shape's size: accurate in single precision however far away the camera is.
-    float middle = -dot(origin - vec3(0.0, 0.0, 0.5), d) / dot(d, d);
-    vec3 p0 = origin + middle * d;
+    float middle;
+    vec3 p0 = near_middle(origin, d, middle);
     float best = 3.0e38;
-    float s0, s1;
-    if (roots(dot(d.xy, d.xy), dot(p0.xy, d.xy), dot(p0.xy, p0.xy) - 1.0, s0, s1)) {
-        vec3 p = p0 + s0 * d;
-        if (p.z >= 0.0 && p.z <= 1.0) keep(middle, s0, vec3(p.xy, 0.0), best, normal);
-        p = p0 + s1 * d;
-        if (p.z >= 0.0 && p.z <= 1.0) keep(middle, s1, vec3(p.xy, 0.0), best, normal);
+    float s[2];
+    if (roots(dot(d.xy, d.xy), dot(p0.xy, d.xy), dot(p0.xy, p0.xy) - 1.0, s[0], s[1])) {
+        for (int i = 0; i < 2; i++) {
+            vec3 p = p0 + s[i] * d;
+            if (p.z >= 0.0 && p.z <= 1.0) keep(middle, s[i], vec3(p.xy, 0.0), best, normal);
+        }
     }
-    if (d.z != 0.0) {
-        float s = -p0.z / d.z;
-        vec2 p = p0.xy + s * d.xy;
-        if (dot(p, p) <= 1.0) keep(middle, s, vec3(0.0, 0.0, -1.0), best, normal);
-        s = (1.0 - p0.z) / d.z;
-        p = p0.xy + s * d.xy;
-        if (dot(p, p) <= 1.0) keep(middle, s, vec3(0.0, 0.0, 1.0), best, normal);
-    }
+    cap(middle, p0, d, 0.0, best, normal);
+    cap(middle, p0, d, 1.0, best, normal);
     t = best;
     return best < 3.0e38;
 }
@@ -89,24 +97,20 @@ bool cylinder_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, out float t, out
 // The unit cone: base radius 1 at z = 0, apex at z = 1, with its base.
 bool cone_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, out float t, out vec3 normal) {
     vec3 d = unit_from_camera * ray;
-    float middle = -dot(origin - vec3(0.0, 0.0, 0.5), d) / dot(d, d);
-    vec3 p0 = origin + middle * d;
+    float middle;
+    vec3 p0 = near_middle(origin, d, middle);
     float best = 3.0e38;
-    float s0, s1;
+    float s[2];
     // x^2 + y^2 = (1 - z)^2 along the ray; the z range keeps the upper nappe's hits out.
     float w = 1.0 - p0.z;
     if (roots(dot(d.xy, d.xy) - d.z * d.z, dot(p0.xy, d.xy) + w * d.z,
-              dot(p0.xy, p0.xy) - w * w, s0, s1)) {
-        vec3 p = p0 + s0 * d;
-        if (p.z >= 0.0 && p.z <= 1.0) keep(middle, s0, vec3(p.xy, 1.0 - p.z), best, normal);
-        p = p0 + s1 * d;
-        if (p.z >= 0.0 && p.z <= 1.0) keep(middle, s1, vec3(p.xy, 1.0 - p.z), best, normal);
+              dot(p0.xy, p0.xy) - w * w, s[0], s[1])) {
+        for (int i = 0; i < 2; i++) {
+            vec3 p = p0 + s[i] * d;
+            if (p.z >= 0.0 && p.z <= 1.0) keep(middle, s[i], vec3(p.xy, 1.0 - p.z), best, normal);
+        }
     }
-    if (d.z != 0.0) {
-        float s = -p0.z / d.z;
-        vec2 p = p0.xy + s * d.xy;
-        if (dot(p, p) <= 1.0) keep(middle, s, vec3(0.0, 0.0, -1.0), best, normal);
-    }
+    cap(middle, p0, d, 0.0, best, normal);
     t = best;
     if (best == 3.0e38) return false;
     // The apex has no normal: light it as the tip of the axis.
