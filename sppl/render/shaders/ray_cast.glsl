@@ -75,19 +75,25 @@ void cap(float middle, vec3 p0, vec3 d, float height, inout float best, inout ve
     if (dot(p, p) <= 1.0) keep(middle, s, vec3(0.0, 0.0, height > 0.5 ? 1.0 : -1.0), best, normal);
 }
 
+// Keeps the hits s0 and s1 with a round side that lie in z [0, 1]; its outward normal at p is
+// (p.x, p.y, slope (1 - p.z)): slope 0 for the cylinder, 1 for the cone.
+void side(float middle, vec3 p0, vec3 d, float s0, float s1, float slope, inout float best,
+          inout vec3 normal) {
+    vec3 p = p0 + s0 * d;
+    if (p.z >= 0.0 && p.z <= 1.0) keep(middle, s0, vec3(p.xy, slope * (1.0 - p.z)), best, normal);
+    p = p0 + s1 * d;
+    if (p.z >= 0.0 && p.z <= 1.0) keep(middle, s1, vec3(p.xy, slope * (1.0 - p.z)), best, normal);
+}
+
 // The unit cylinder: radius 1 about the z axis, z in [0, 1], with both caps.
 bool cylinder_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, out float t, out vec3 normal) {
     vec3 d = unit_from_camera * ray;
     float middle;
     vec3 p0 = near_middle(origin, d, middle);
     float best = 3.0e38;
-    float s[2];
-    if (roots(dot(d.xy, d.xy), dot(p0.xy, d.xy), dot(p0.xy, p0.xy) - 1.0, s[0], s[1])) {
-        for (int i = 0; i < 2; i++) {
-            vec3 p = p0 + s[i] * d;
-            if (p.z >= 0.0 && p.z <= 1.0) keep(middle, s[i], vec3(p.xy, 0.0), best, normal);
-        }
-    }
+    float s0, s1;
+    if (roots(dot(d.xy, d.xy), dot(p0.xy, d.xy), dot(p0.xy, p0.xy) - 1.0, s0, s1))
+        side(middle, p0, d, s0, s1, 0.0, best, normal);
     cap(middle, p0, d, 0.0, best, normal);
     cap(middle, p0, d, 1.0, best, normal);
     t = best;
@@ -100,16 +106,12 @@ bool cone_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, out float t, out vec
     float middle;
     vec3 p0 = near_middle(origin, d, middle);
     float best = 3.0e38;
-    float s[2];
-    // x^2 + y^2 = (1 - z)^2 along the ray; the z range keeps the upper nappe's hits out.
+    float s0, s1;
+    // x^2 + y^2 = (1 - z)^2 along the ray; side()'s z range keeps the upper nappe's hits out.
     float w = 1.0 - p0.z;
     if (roots(dot(d.xy, d.xy) - d.z * d.z, dot(p0.xy, d.xy) + w * d.z,
-              dot(p0.xy, p0.xy) - w * w, s[0], s[1])) {
-        for (int i = 0; i < 2; i++) {
-            vec3 p = p0 + s[i] * d;
-            if (p.z >= 0.0 && p.z <= 1.0) keep(middle, s[i], vec3(p.xy, 1.0 - p.z), best, normal);
-        }
-    }
+              dot(p0.xy, p0.xy) - w * w, s0, s1))
+        side(middle, p0, d, s0, s1, 1.0, best, normal);
     cap(middle, p0, d, 0.0, best, normal);
     t = best;
     if (best == 3.0e38) return false;
