@@ -50,14 +50,10 @@ class DrawCache:
         rects, nearest = self._project_corners(corners)
         return Drawn(instance_rows(parts), rects, self._inside(parts, corners, nearest))
 
-    def rects(self, corners: np.ndarray) -> tuple[Rect | None, ...]:
-        """Per camera, ``CameraBounds.rect_of(corners)``, for all cameras from one product."""
-        return self._project_corners(corners)[0]
-
-    def _project_corners(self, corners: np.ndarray) -> tuple[tuple, list[float]]:
-        """``rects``, and per camera the smallest z-depth of the corners. An object has a few
-        dozen corners: past the product, plain floats are quicker than numpy's calls on
-        arrays this small."""
+    def _project_corners(self, corners: np.ndarray) -> tuple[tuple[Rect | None, ...], list[float]]:
+        """Per camera, ``CameraBounds.rect_of(corners)`` and the corners' smallest z-depth,
+        for all cameras from one product. An object has a few dozen corners: past the
+        product, plain floats are quicker than numpy's calls on arrays this small."""
         rows = (self._project @ corners).tolist()
         out, nearest = [], []
         for c, b in enumerate(self.bounds):

@@ -6,9 +6,9 @@ back as float32 arrays in the camera's conventions (see ``sppl.camera``).
 
 Round shapes are the exception (``RAY_CAST``): a tessellated sphere needs a thousand triangles
 to look round, and on a software rasteriser the setup of a cone's or a cylinder's hundred or two
-costs more than their pixels. Each is drawn as an inside-out bounding box, and the fragment
-shader intersects each pixel's ray with the exact (affinely posed) sphere, cylinder or cone
-(``shaders/ray_cast.glsl``), which is both cheaper and exact.
+costs more than their pixels. Each is drawn as a convex solid around it turned inside out
+(``_proxy``), and the fragment shader intersects each pixel's ray with the exact (affinely
+posed) sphere, cylinder or cone (``shaders/ray_cast.glsl``), which is both cheaper and exact.
 """
 
 from __future__ import annotations
@@ -33,9 +33,8 @@ from .context import claim_state, gl_context
 FLIP_Y = np.diag([1.0, -1.0, 1.0, 1.0])
 
 
-# Primitives whose surface the fragment shader ray-casts exactly over a proxy mesh, each with
-# the point of its unit shape that ray_cast.glsl takes coordinates from (the sphere's centre).
-RAY_CAST = {"sphere": (0.0, 0.0, 1.0), "cylinder": (0.0, 0.0, 0.0), "cone": (0.0, 0.0, 0.0)}
+# Primitives whose surface the fragment shader ray-casts exactly over a proxy mesh.
+RAY_CAST = frozenset({"sphere", "cylinder", "cone"})
 
 
 # The vertex rows' layout as each program reads it: a proxy's normals are not used.
@@ -54,9 +53,7 @@ def _shader(name: str, shape: str | None = None) -> str:
         return text
     version, _, body = text.partition("\n")
     extra = _shader("ray_cast.glsl") if name.endswith(".frag") else ""
-    centre = ", ".join(f"{x:.1f}" for x in RAY_CAST[shape])
-    return (f"{version}\n#define RAY_CAST\n#define HIT {shape}_hit\n"
-            f"#define CENTRE vec3({centre})\n{extra}\n{body}")
+    return f"{version}\n#define RAY_CAST\n#define HIT {shape}_hit\n{extra}\n{body}"
 
 
 def program(ctx: moderngl.Context, vertex: str, fragment: str,

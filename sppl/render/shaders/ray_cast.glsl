@@ -2,8 +2,8 @@
 // or an elliptic cylinder or cone, and each pixel's ray is intersected with it here instead of
 // rasterising a tessellation. The vertex shader draws an inside-out bounding box (its far
 // faces) to reach every pixel the shape may cover and passes, per part, the camera's origin
-// and the camera-to-unit linear map in the unit shape's coordinates (less CENTRE, below).
-// Compiled with HIT defined as one of the *_hit functions.
+// and the camera-to-unit linear map in the unit shape's coordinates. Compiled with HIT
+// defined as one of the *_hit functions.
 uniform vec4 intrinsics;  // fx, fy, cx, cy in pixels
 uniform float near;
 
@@ -20,8 +20,9 @@ vec3 pixel_ray() {
 // inside the shape, or one whose near plane cuts it, sees the far side, as it sees a mesh's
 // back faces.
 
-// The unit sphere: radius 1, centre (0, 0, 1); origin is relative to the centre.
-bool sphere_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, out float t, out vec3 normal) {
+// The unit sphere: radius 1, centre (0, 0, 1).
+bool sphere_hit(vec3 camera, mat3 unit_from_camera, vec3 ray, out float t, out vec3 normal) {
+    vec3 origin = camera - vec3(0.0, 0.0, 1.0);  // relative to the centre
     vec3 d = unit_from_camera * ray;
     float a = dot(d, d);
     // Through the point of the ray closest to the centre, which keeps the discriminant accurate
@@ -59,14 +60,6 @@ bool roots(float a, float b, float c, out float s0, out float s1) {
     return true;
 }
 
-// The ray's point nearest the middle of the unit box (z in [0, 1]) and its parameter there.
-// A cylinder's or cone's hits are solved from it, where every coefficient is of the shape's
-// size: accurate in single precision however far away the camera is.
-vec3 near_middle(vec3 origin, vec3 d, out float middle) {
-    middle = -dot(origin - vec3(0.0, 0.0, 0.5), d) / dot(d, d);
-    return origin + middle * d;
-}
-
 // Keeps the ray's hit with the disc of radius 1 in the plane z = height.
 void cap(float middle, vec3 p0, vec3 d, float height, inout float best, inout vec3 normal) {
     if (d.z == 0.0) return;
@@ -75,49 +68,43 @@ void cap(float middle, vec3 p0, vec3 d, float height, inout float best, inout ve
     if (dot(p, p) <= 1.0) keep(middle, s, vec3(0.0, 0.0, height > 0.5 ? 1.0 : -1.0), best, normal);
 }
 
-// Keeps the hits s0 and s1 with a round side that lie in z [0, 1]; its outward normal at p is
-// (p.x, p.y, slope (1 - p.z)): slope 0 for the cylinder, 1 for the cone.
-void side(float middle, vec3 p0, vec3 d, float s0, float s1, float slope, inout float best,
-          inout vec3 normal) {
-    vec3 p = p0 + s0 * d;
-    if (p.z >= 0.0 && p.z <= 1.0) keep(middle, s0, vec3(p.xy, slope * (1.0 - p.z)), best, normal);
-    p = p0 + s1 * d;
-    if (p.z >= 0.0 && p.z <= 1.0) keep(middle, s1, vec3(p.xy, slope * (1.0 - p.z)), best, normal);
-}
-
-// The unit cylinder: radius 1 about the z axis, z in [0, 1], with both caps.
-bool cylinder_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, out float t, out vec3 normal) {
+// The unit cylinder (slope 0: radius 1 about the z axis, z in [0, 1], with both caps) or cone
+// (slope 1: base radius 1 at z = 0, apex at z = 1, with its base): x^2 + y^2 = (1 - slope z)^2
+// for z in [0, 1], which also keeps the cone's upper nappe out.
+bool round_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, float slope, out float t,
+               out vec3 normal) {
     vec3 d = unit_from_camera * ray;
-    float middle;
-    vec3 p0 = near_middle(origin, d, middle);
+    // Solved from the ray's point nearest the middle of the unit box, where every coefficient
+    // is of the shape's size: accurate in single precision however far away the camera is.
+    float middle = -dot(origin - vec3(0.0, 0.0, 0.5), d) / dot(d, d);
+    vec3 p0 = origin + middle * d;
     float best = 3.0e38;
-    float s0, s1;
-    if (roots(dot(d.xy, d.xy), dot(p0.xy, d.xy), dot(p0.xy, p0.xy) - 1.0, s0, s1))
-        side(middle, p0, d, s0, s1, 0.0, best, normal);
+    float s[2];
+    float w = 1.0 - slope * p0.z;
+    float e = slope * d.z;
+    if (roots(dot(d.xy, d.xy) - e * e, dot(p0.xy, d.xy) + w * e, dot(p0.xy, p0.xy) - w * w,
+              s[0], s[1])) {
+        for (int i = 0; i < 2; i++) {
+            vec3 p = p0 + s[i] * d;
+            if (p.z >= 0.0 && p.z <= 1.0)
+                keep(middle, s[i], vec3(p.xy, slope * (1.0 - p.z)), best, normal);
+        }
+    }
     cap(middle, p0, d, 0.0, best, normal);
-    cap(middle, p0, d, 1.0, best, normal);
-    t = best;
-    return best < 3.0e38;
-}
-
-// The unit cone: base radius 1 at z = 0, apex at z = 1, with its base.
-bool cone_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, out float t, out vec3 normal) {
-    vec3 d = unit_from_camera * ray;
-    float middle;
-    vec3 p0 = near_middle(origin, d, middle);
-    float best = 3.0e38;
-    float s0, s1;
-    // x^2 + y^2 = (1 - z)^2 along the ray; side()'s z range keeps the upper nappe's hits out.
-    float w = 1.0 - p0.z;
-    if (roots(dot(d.xy, d.xy) - d.z * d.z, dot(p0.xy, d.xy) + w * d.z,
-              dot(p0.xy, p0.xy) - w * w, s0, s1))
-        side(middle, p0, d, s0, s1, 1.0, best, normal);
-    cap(middle, p0, d, 0.0, best, normal);
+    if (slope == 0.0) cap(middle, p0, d, 1.0, best, normal);
     t = best;
     if (best == 3.0e38) return false;
-    // The apex has no normal: light it as the tip of the axis.
+    // The cone's apex has no normal: light it as the tip of the axis.
     if (normal == vec3(0.0)) normal = vec3(0.0, 0.0, 1.0);
     return true;
+}
+
+bool cylinder_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, out float t, out vec3 normal) {
+    return round_hit(origin, unit_from_camera, ray, 0.0, t, normal);
+}
+
+bool cone_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, out float t, out vec3 normal) {
+    return round_hit(origin, unit_from_camera, ray, 1.0, t, normal);
 }
 
 // gl_FragDepth of a camera-space point, as the rasteriser would interpolate it.

@@ -13,7 +13,7 @@ in vec3 in_normal;
 out vec3 v_normal;  // world space
 out vec3 v_camera;  // camera-space position, for exact metric depth
 #ifdef RAY_CAST
-flat out vec3 v_origin;           // the camera's origin in unit coordinates, less CENTRE
+flat out vec3 v_origin;           // the camera's origin in unit coordinates
 flat out mat3 v_unit_from_camera;
 #endif
 
@@ -26,7 +26,7 @@ void main() {
     mat3 unit_from_world = transpose(normal_matrix);
     mat3 world_from_camera = transpose(mat3(view));
     vec3 eye = -(world_from_camera * view[3].xyz);
-    v_origin = unit_from_world * (eye - model[3].xyz) - CENTRE;
+    v_origin = unit_from_world * (eye - model[3].xyz);
     v_unit_from_camera = unit_from_world * world_from_camera;
 #endif
 }

@@ -31,7 +31,7 @@ void main() {
     mat3 unit_from_world = transpose(i_normal);
     mat3 world_from_camera = transpose(mat3(view));
     vec3 eye = -(world_from_camera * view[3].xyz);
-    v_origin = unit_from_world * (eye - i_model[3].xyz) - CENTRE;
+    v_origin = unit_from_world * (eye - i_model[3].xyz);
     v_unit_from_camera = unit_from_world * world_from_camera;
     v_normal_matrix = i_normal;
 #endif
