@@ -10,8 +10,10 @@ rectangle meets the region it renders: the whole image, or the few pixels a move
 from __future__ import annotations
 
 import math
+from math import ceil, floor
+from operator import truediv
 from collections.abc import Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -20,9 +22,11 @@ from .bounds import INSIDE_MARGIN, MARGIN, CameraBounds, Rect, contains, world_c
 from .pixels import instance_rows
 
 
-@dataclass(frozen=True, eq=False)
-class Drawn:
-    rows: dict[str, np.ndarray]  # per primitive, the instance rows of its parts, in order
+class Drawn(NamedTuple):
+    """What an object contributes to each camera's pass. A named tuple: one is made for every
+    object a chain proposes, and a frozen dataclass costs several times as much to make."""
+
+    rows: dict[str, bytes]  # per primitive, the instance rows of its parts, in order, packed
     rects: tuple[Rect | None, ...]  # per camera, the pixels it can cover (None: out of view)
     # Per camera: whether the camera may be inside one of the parts, where back faces show.
     inside: tuple[bool, ...]
@@ -58,14 +62,14 @@ class DrawCache:
         out, nearest = [], []
         for c, b in enumerate(self.bounds):
             us, vs, ws = rows[3 * c], rows[3 * c + 1], rows[3 * c + 2]
-            nearest.append(min(ws))
-            if nearest[-1] <= b.near or not math.isfinite(sum(us) + sum(vs) + sum(ws)):
+            near = min(ws)
+            nearest.append(near)
+            u, v = list(map(truediv, us, ws)), list(map(truediv, vs, ws))
+            if near <= b.near or not math.isfinite(sum(u) + sum(v)):
                 out.append(b.full)  # reaching behind the camera (or degenerate)
                 continue
-            u = [a / w for a, w in zip(us, ws)]
-            v = [a / w for a, w in zip(vs, ws)]
-            c0, c1 = max(math.floor(min(u)) - MARGIN, 0), min(math.ceil(max(u)) + MARGIN, b.width)
-            r0, r1 = max(math.floor(min(v)) - MARGIN, 0), min(math.ceil(max(v)) + MARGIN, b.height)
+            c0, c1 = max(floor(min(u)) - MARGIN, 0), min(ceil(max(u)) + MARGIN, b.width)
+            r0, r1 = max(floor(min(v)) - MARGIN, 0), min(ceil(max(v)) + MARGIN, b.height)
             out.append(None if c0 >= c1 or r0 >= r1 else (r0, r1, c0, c1))
         return tuple(out), nearest
 

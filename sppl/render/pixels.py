@@ -22,6 +22,7 @@ still drawn.
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -41,6 +42,7 @@ if TYPE_CHECKING:
 
 # An instance's row of floats: model matrix (16), normal matrix (9), colour (3), column-major.
 INSTANCE_FORMAT = "16f 9f 3f/i"
+ROW_BYTES = 4 * (16 + 9 + 3)
 # An observed value that marks "no term here". Not -1 or any value an observation can take:
 # simulated images and depth maps (Gaussian noise around a dark colour or a near surface) go
 # below zero, and such a pixel must still be scored. The shader takes any value below
@@ -49,18 +51,23 @@ MISSING = -3.0e38
 TRIANGLES = moderngl.TRIANGLES
 
 
-def instance_rows(parts: Sequence[Part]) -> dict[str, np.ndarray]:
-    """Per primitive, the instance rows of its parts, in the parts' order. Parts whose matrix
-    is singular are left out, as ``Renderer`` leaves them out (they enclose nothing)."""
-    groups: dict[str, list[list[float]]] = {}
+def instance_rows(parts: Sequence[Part]) -> dict[str, bytes]:
+    """Per primitive, the instance rows of its parts, in the parts' order, packed as the
+    instance buffer holds them. Parts whose matrix is singular are left out, as ``Renderer``
+    leaves them out (they enclose nothing)."""
+    groups: dict[str, list[float]] = {}
     for part in parts:
         inverse = linear_inverse(part.matrix)
         if inverse is None:
             continue
         # Column-major model matrix; the inverse's rows are the inverse-transpose's columns.
-        groups.setdefault(part.primitive, []).append(
-            [*part.matrix.T.ravel().tolist(), *inverse, *part.colour])
-    return {primitive: np.array(rows, dtype="f4") for primitive, rows in groups.items()}
+        row = groups.setdefault(part.primitive, [])
+        row += part.matrix.ravel(order="F").tolist()
+        row += inverse
+        row += part.colour
+    # Packed bytes rather than an array: a pass joins and uploads them and needs nothing else,
+    # and packing a few floats costs a third of making an array of them.
+    return {primitive: struct.pack(f"{len(row)}f", *row) for primitive, row in groups.items()}
 
 
 class _Slot:
@@ -159,10 +166,10 @@ class PixelScorer:
         a list of (rows, cols, 2) arrays, or None for the cameras skipped. Only what meets a
         rectangle is drawn there."""
         self._begin()
-        windows = []
+        out = []
         for c, rect in enumerate(rects):
             if rect is None:
-                windows.append(None)
+                out.append(None)
                 continue
             window = (rect[2], rect[0], rect[3] - rect[2], rect[1] - rect[0])  # _window(rect)
             fbo = self._fbos[c]
@@ -170,16 +177,10 @@ class PixelScorer:
             fbo.use()
             fbo.clear(0.0, 0.0, 0.0, 0.0, 1.0)
             self._draw(c, drawn, rect)
-            windows.append(window)
-        self.ctx.scissor = None  # left on, the scissor test would restrict others' clears
-        out = []
-        for c, window in enumerate(windows):
-            if window is None:
-                out.append(None)
-                continue
             patch = np.empty((window[3], window[2], 2), dtype="f4")
-            self._fbos[c].read_into(patch, window, 2, dtype="f4")
+            fbo.read_into(patch, window, 2, dtype="f4")
             out.append(patch)
+        self.ctx.scissor = None  # left on, the scissor test would restrict others' clears
         return out
 
     def change(self, new: np.ndarray, old: np.ndarray | None) -> np.ndarray:
@@ -229,7 +230,7 @@ class PixelScorer:
     def _draw(self, c: int, drawn: Sequence[Drawn], region: Rect | None) -> Rect | None:
         """Draw camera c's view of ``drawn`` (inside ``region``) into the bound framebuffer;
         the rectangle that holds every pixel drawn (None: nothing was)."""
-        rows: dict[str, list[np.ndarray]] = {}
+        rows: dict[str, list[bytes]] = {}
         cover = None
         cull = True
         for d in drawn:
@@ -259,17 +260,17 @@ class PixelScorer:
         # is inside a part (``cull`` above): the same rule as Renderer's, so the same pixels.
         slot = self._slots[c]
         for primitive, chunks in rows.items():
-            data = chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
+            data = chunks[0] if len(chunks) == 1 else b"".join(chunks)
             entry = slot.entries.get(primitive)
-            if entry is None or entry[2] < data.nbytes:
-                entry = self._entry(c, slot, primitive, data.nbytes)
+            if entry is None or entry[2] < len(data):
+                entry = self._entry(c, slot, primitive, len(data))
             vao, buffer, _, is_closed = entry
             buffer.write(data)
             culling = cull and is_closed
             if culling != self._culling:
                 (self.ctx.enable if culling else self.ctx.disable)(moderngl.CULL_FACE)
                 self._culling = culling
-            vao.render(TRIANGLES, -1, 0, len(data))
+            vao.render(TRIANGLES, -1, 0, len(data) // ROW_BYTES)
         return cover if region is None else region
 
     def _entry(self, c: int, slot: _Slot, primitive: str, nbytes: int) -> tuple:
@@ -277,7 +278,7 @@ class PixelScorer:
         room for nbytes of instance rows."""
         buffer = slot.buffers.get(primitive)
         if buffer is None:
-            buffer = slot.buffers[primitive] = self.ctx.buffer(reserve=max(nbytes, 1024))
+            buffer = slot.buffers[primitive] = self.ctx.buffer(reserve=max(nbytes, 1024), dynamic=True)
             slot.vaos[primitive] = self.ctx.vertex_array(self._program(c, shape(primitive)), [
                 (self._mesh(primitive), *VERTEX_FORMAT[primitive in RAY_CAST]),
                 (buffer, INSTANCE_FORMAT, "i_model", "i_normal", "i_colour"),
