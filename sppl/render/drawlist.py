@@ -10,9 +10,9 @@ rectangle meets the region it renders: the whole image, or the few pixels a move
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from math import ceil, floor
 from operator import truediv
-from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np

@@ -278,7 +278,8 @@ class PixelScorer:
         room for nbytes of instance rows."""
         buffer = slot.buffers.get(primitive)
         if buffer is None:
-            buffer = slot.buffers[primitive] = self.ctx.buffer(reserve=max(nbytes, 1024), dynamic=True)
+            buffer = slot.buffers[primitive] = self.ctx.buffer(reserve=max(nbytes, 1024),
+                                                               dynamic=True)
             slot.vaos[primitive] = self.ctx.vertex_array(self._program(c, shape(primitive)), [
                 (self._mesh(primitive), *VERTEX_FORMAT[primitive in RAY_CAST]),
                 (buffer, INSTANCE_FORMAT, "i_model", "i_normal", "i_colour"),
