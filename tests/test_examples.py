@@ -111,7 +111,9 @@ def test_example_regenerates_its_figures(script, tmp_path, require_gl):
     if script.startswith("fusion"):
         verdict = {line.split("  ")[0].strip(): line.split()[-1] for line in out.splitlines()
                    if line.startswith(("RGB camera alone", "depth camera alone", "both (fusion)"))}
-        assert verdict == {"RGB camera alone": "no", "depth camera alone": "no",
+        # docs/fusion.md's table: the RGB camera alone recovers every object in this run (it
+        # did not with earlier samplers and renderers), the depth camera alone cannot.
+        assert verdict == {"RGB camera alone": "yes", "depth camera alone": "no",
                            "both (fusion)": "yes"}, out
     elif script.startswith("occlusion"):
         assert occlusion_claims(out) == [], out

@@ -1,15 +1,15 @@
-"""Sensor fusion: each camera alone gets an object wrong; both together recover every one.
+"""Sensor fusion: what each camera alone recovers, and both together.
 
     python examples/fusion/experiment.py            # about 10 minutes on two CPU cores
     python examples/fusion/experiment.py --quick    # a smoke test: a few hundred sweeps
 
 Four objects, two cameras of different modalities (the thesis's multi-modal experiment
 in miniature). The RGB camera looks along -x and a red cube hides all but the top of a blue
-sphere from it (16 of its 113 pixels), so it sees the sphere's colour but not where it is; the
-depth camera looks along +y and a green cube hides a red cone from it, and a depth camera sees
-no colour at all. Each camera alone therefore gets something wrong; together they have what
-it takes: the depth camera places the sphere, the RGB camera gives its colour and shows the
-cone. The script simulates the observations (examples/fusion/cameras.json and
+sphere from it (16 of its 113 pixels), so it sees the sphere's colour and little of where it
+is; the depth camera looks along +y and a green cube hides a red cone from it, and a depth
+camera sees no colour at all. The depth camera alone cannot get the colours or the hidden
+cone; together the cameras have what it takes: the depth camera places the sphere, the RGB
+camera gives its colour and shows the cone. The script simulates the observations (examples/fusion/cameras.json and
 scene.json), samples the posterior three times, with the RGB camera alone, the depth camera
 alone and both, prints a table of what each MAP scene got right, and draws the occupancy maps
 side by side into docs/images/fusion_occupancy.png and the two views into
