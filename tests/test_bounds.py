@@ -83,6 +83,16 @@ def test_the_cases_the_rectangles_must_tell_apart():
     assert cache.of_parts([ahead, aside]).inside == (False,)
 
 
+def test_a_corner_in_the_camera_plane_takes_the_whole_image():
+    """A box whose face lies in the camera's plane has corners at depth exactly 0: they
+    reach behind the near plane, so the rectangle is the whole image (and no division by
+    that depth is made)."""
+    camera = Camera("c", 32, 24, 30.0, 30.0, 16.0, 12.0, look_at((0, -5, 1), (0, 0, 1)), 10.0)
+    part = Part("box", translation(0, -4.5, 1) @ scaling(1, 1, 1), (1, 0, 0))
+    assert CameraBounds(camera).rect_of(world_corners([part])) == (0, 24, 0, 32)
+    assert DrawCache([CameraBounds(camera)]).of_parts([part]).rects == ((0, 24, 0, 32),)
+
+
 def test_the_depth_pre_check_never_hides_an_inside_camera():
     """Cameras within a few margins of a sheared part's box, most looking at it: the inside
     test's shortcut (no corner nearer than 3 margins) says outside only where the solve

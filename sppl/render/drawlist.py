@@ -64,10 +64,10 @@ class DrawCache:
             us, vs, ws = rows[3 * c], rows[3 * c + 1], rows[3 * c + 2]
             near = min(ws)
             nearest.append(near)
-            u, v = list(map(truediv, us, ws)), list(map(truediv, vs, ws))
-            if near <= b.near or not math.isfinite(sum(u) + sum(v)):
+            if near <= b.near or not math.isfinite(sum(us) + sum(vs) + sum(ws)):
                 out.append(b.full)  # reaching behind the camera (or degenerate)
                 continue
+            u, v = list(map(truediv, us, ws)), list(map(truediv, vs, ws))
             c0, c1 = max(floor(min(u)) - MARGIN, 0), min(ceil(max(u)) + MARGIN, b.width)
             r0, r1 = max(floor(min(v)) - MARGIN, 0), min(ceil(max(v)) + MARGIN, b.height)
             out.append(None if c0 >= c1 or r0 >= r1 else (r0, r1, c0, c1))
