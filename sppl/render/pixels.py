@@ -61,13 +61,14 @@ def instance_rows(parts: Sequence[Part]) -> dict[str, bytes]:
         if inverse is None:
             continue
         # Column-major model matrix; the inverse's rows are the inverse-transpose's columns.
-        row = groups.setdefault(part.primitive, [])
-        row += part.matrix.ravel(order="F").tolist()
-        row += inverse
-        row += part.colour
+        floats = groups.setdefault(part.primitive, [])
+        floats += part.matrix.ravel(order="F").tolist()
+        floats += inverse
+        floats += part.colour
     # Packed bytes rather than an array: a pass joins and uploads them and needs nothing else,
     # and packing a few floats costs a third of making an array of them.
-    return {primitive: struct.pack(f"{len(row)}f", *row) for primitive, row in groups.items()}
+    return {primitive: struct.pack(f"{len(floats)}f", *floats)
+            for primitive, floats in groups.items()}
 
 
 class _Slot:
