@@ -149,7 +149,8 @@ class Renders(Mapping):
 
 
 class _Pixels:
-    """The per-pixel terms of one hypothesis and their float64 sums (cameras, 2). Per camera
+    """The per-pixel terms of one hypothesis and their float64 sums, a flat list of floats
+    (camera 0's image and depth sums, then camera 1's, ...). Per camera
     the terms are a block (rect, terms), 0 outside rect, or None where all are 0 (as
     ``PixelScorer.render`` gives them). A hypothesis scored incrementally stores only its
     parent's record and the rectangles it re-rendered; its own blocks are made when it
@@ -290,8 +291,8 @@ class Scorer(ReferenceScorer):
         blocks, sums = self.pixels.render([self._drawn(objects) for objects in hypotheses])
         out = []
         for b, objects in enumerate(hypotheses):
-            pixels = _Pixels(sums[b], blocks[b])
-            out.append((self._stats(sums[b]), Renders(self, objects, pixels)))
+            flat = sums[b].ravel().tolist()
+            out.append((self._stats(flat), Renders(self, objects, _Pixels(flat, blocks[b]))))
         return out
 
     # -- helpers -------------------------------------------------------------------------------
@@ -299,10 +300,8 @@ class Scorer(ReferenceScorer):
     def _drawn(self, objects) -> list:
         return [*self._static, *(self.draws.of_object(o) for o in objects)]
 
-    def _stats(self, sums: np.ndarray) -> dict[tuple[int, str], np.ndarray]:
-        # A few terms: plain floats, then one small array each, beat numpy's indexing.
-        flat = sums.ravel().tolist()
-        return {key: np.array((n, max(empty + flat[i], 0.0)))
+    def _stats(self, sums: list[float]) -> dict[tuple[int, str], np.ndarray]:
+        return {key: np.array((n, max(empty + sums[i], 0.0)))
                 for key, i, n, empty in self._terms}
 
     def _incremental(self, old_objects, objects, before: _Pixels) -> _Pixels | None:
@@ -332,13 +331,16 @@ class Scorer(ReferenceScorer):
             return before  # no camera sees the change
         blocks = before.materialise()
         patches = self.pixels.render_regions(self._drawn(objects), rects)
-        sums = before.sums.copy()
+        # The sums as plain floats: a move's few additions cost less than numpy's indexing.
+        sums = list(before.sums)
         kept = []
         change = self.pixels.change
         for c, patch in enumerate(patches):
             if patch is not None:
                 rect = rects[c]
-                sums[c] += change(patch, _crop(blocks[c], rect))
+                image, depth = change(patch, _crop(blocks[c], rect)).tolist()
+                sums[2 * c] += image
+                sums[2 * c + 1] += depth
                 kept.append((c, rect, patch))
         return _Pixels(sums, parent=before, patches=tuple(kept))
 
