@@ -22,7 +22,8 @@ Every rate is the median of --repeats runs of at least --seconds each. The paths
 interleaved within a repeat, and each ratio is the median over the repeats of the ratio
 measured within one repeat (its range is printed too): on a shared machine whose speed drifts
 by tens of percent from one second to the next, that compares like with like. The GL renderer
-in use is printed first: on a machine with a GPU the same command gives the GPU figure.
+in use is printed first: on a machine with a GPU the same command gives the GPU figure. So is
+whether the fast path's compiled kernels run (``SPPL_PURE_PYTHON=1`` runs their Python twins).
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ from sppl.camera import Camera, focal_from_fov, look_at  # noqa: E402
 from sppl.chain import Sampler  # noqa: E402
 from sppl.lang import load_model  # noqa: E402
 from sppl.observations import CameraSpec, Observations  # noqa: E402
-from sppl.render import Renderer, renderer_string  # noqa: E402
+from sppl.render import Renderer, kernels, renderer_string  # noqa: E402
 from sppl.scoring import ReferenceScorer, Scorer  # noqa: E402
 from sppl.simulate import render_observations  # noqa: E402
 from sppl.trace import make_object  # noqa: E402
@@ -209,6 +210,7 @@ def main(argv=None) -> None:
     model = load_model(ROOT / "models" / "shapes.scn")
     renderer = Renderer(model.render)
     print(f"GL renderer: {renderer_string()}")
+    print(f"Per-move code: {kernels.describe()}")
     why_not = panda3d_path.available()
     pandas = {}
     if why_not is None:

@@ -338,7 +338,7 @@ class Scorer(ReferenceScorer):
         for c, patch in enumerate(patches):
             if patch is not None:
                 rect = rects[c]
-                image, depth = change(patch, _crop(blocks[c], rect)).tolist()
+                image, depth = change(patch, _crop(blocks[c], rect))
                 sums[2 * c] += image
                 sums[2 * c + 1] += depth
                 kept.append((c, rect, patch))

@@ -18,7 +18,16 @@ from typing import NamedTuple
 import numpy as np
 
 from ..geometry import Part
-from .bounds import INSIDE_MARGIN, MARGIN, CameraBounds, Rect, contains, world_corners
+from .bounds import (
+    INSIDE_MARGIN,
+    MARGIN,
+    CameraBounds,
+    Rect,
+    contains,
+    unit_corners,
+    world_corners,
+)
+from .kernels import compiled
 from .pixels import instance_rows
 
 
@@ -39,6 +48,8 @@ class DrawCache:
         # in one product.
         self._project = np.concatenate([b.pixels_from_world for b in self.bounds])
         self._positions = [tuple(float(x) for x in b.position) for b in self.bounds]
+        self._limits = tuple((float(b.near), b.width, b.height) for b in self.bounds)
+        self.compiled = compiled
 
     def of_object(self, obj) -> Drawn:
         drawn = obj.cache.get(self)
@@ -47,6 +58,19 @@ class DrawCache:
         return drawn
 
     def of_parts(self, parts: Sequence[Part]) -> Drawn:
+        if parts and self.compiled is not None:
+            found = self.compiled.draw_data(parts, unit_corners, self._project, self._limits,
+                                            MARGIN)
+            if found is not None:
+                rows, rects, nearest = found
+                # The corners again, in numpy, only for the rare camera near the object.
+                if min(nearest) > 3.0 * INSIDE_MARGIN:
+                    return Drawn(rows, rects, (False,) * len(rects))
+                return Drawn(rows, rects, self._inside(parts, world_corners(parts), nearest))
+        return self.of_parts_python(parts)
+
+    def of_parts_python(self, parts: Sequence[Part]) -> Drawn:
+        """``of_parts`` in Python: the compiled kernel's twin and fallback."""
         n = len(self.bounds)
         if not parts:
             return Drawn({}, (None,) * n, (False,) * n)

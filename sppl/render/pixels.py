@@ -35,6 +35,7 @@ from ..geometry import Part, linear_inverse
 from ..model import RenderSettings
 from .bounds import Rect, closed, union
 from .context import claim_state, gl_context
+from .kernels import compiled
 from .renderer import FLIP_Y, RAY_CAST, VERTEX_FORMAT, _column_major, flat_vertices, program, shape
 
 if TYPE_CHECKING:
@@ -92,6 +93,7 @@ class PixelScorer:
 
     def __init__(self, settings: RenderSettings, cameras: Sequence[Camera], observed) -> None:
         self.ctx = ctx = gl_context()
+        self.compiled = compiled
         self.cameras = list(cameras)
         light = np.asarray(settings.light, dtype=float)
         # Each camera's observation stays bound to a texture unit of its own (while there
@@ -156,7 +158,7 @@ class PixelScorer:
                 block = np.empty((rect[1] - rect[0], rect[3] - rect[2], 2), dtype="f4")
                 self._target(c).read_into(block, viewport=_window(rect), components=2,
                                           dtype="f4")
-                sums[b, c] = self.total(block)
+                sums[b, c] = self.change(block, None)
                 terms.append((rect, block))
             blocks.append(terms)
         self.ctx.scissor = None  # left on, the scissor test would restrict others' clears
@@ -184,8 +186,17 @@ class PixelScorer:
         self.ctx.scissor = None  # left on, the scissor test would restrict others' clears
         return out
 
-    def change(self, new: np.ndarray, old: np.ndarray | None) -> np.ndarray:
-        """Float64 sums of new's terms less old's (None: no terms; else of new's shape)."""
+    def change(self, new: np.ndarray, old: np.ndarray | None):
+        """Float64 sums of new's terms less old's (None: no terms; else of new's shape), as
+        a pair of floats."""
+        if self.compiled is not None:
+            found = self.compiled.change(new, old)
+            if found is not None:
+                return found
+        return tuple(self.change_python(new, old).tolist())
+
+    def change_python(self, new: np.ndarray, old: np.ndarray | None) -> np.ndarray:
+        """``change`` in numpy: the compiled kernel's twin and fallback."""
         if old is None:
             return self.total(new)
         # One difference of the blocks in float64 (exact: both are float32) and one sum.
