@@ -2,11 +2,13 @@
 
    A chain proposes a new object at every move, and working out what that object draws (its
    corners in every camera, its instance rows) and summing a re-rendered patch against its
-   parent's terms were, in Python, a third of a move's time. These functions compute exactly
-   what their Python twins in drawlist.py and pixels.py compute, with the same double
-   arithmetic in the same order where the result is compared (-ffp-contract=off keeps the
-   compiler from fusing it), and the tests hold the two to each other. They return None for
-   inputs they do not take (another dtype, another shape), and the caller then uses the twin. */
+   parent's terms were, in Python, a third of a move's time. These functions compute what their
+   Python twins in drawlist.py and pixels.py compute: the instance rows with the twin's double
+   arithmetic in its order (-ffp-contract=off keeps the compiler from fusing it), so the very
+   same float32s; the corners' projections and the sums to rounding, which the rectangles'
+   pixel of margin and the float64 sums absorb. The tests hold the two to each other. They
+   return None for inputs they do not take (another dtype, another shape), and the caller then
+   uses the twin. */
 
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -15,7 +17,7 @@
 
 #define ROW_FLOATS 28 /* model matrix (16), normal matrix (9), colour (3) */
 
-/* A float64 view of a buffer of the given shape, read through its strides. */
+/* A buffer held for reading through its strides, once its format and shape are checked. */
 typedef struct {
     Py_buffer view;
     int held;
