@@ -176,46 +176,44 @@ static PyObject *draw_data(PyObject *self, PyObject *args)
         ok[p] = 1;
     }
 
-    /* Instance rows, grouped by primitive in the order each first has a drawn part. */
+    /* Instance rows, grouped by primitive in the order each first has a drawn part: first
+       each primitive's list of parts, then each list replaced by the parts' packed rows. */
     rows = PyDict_New();
     if (!rows)
         goto done;
     for (Py_ssize_t p = 0; p < n; p++) {
         if (!ok[p])
             continue;
-        int seen = PyDict_Contains(rows, primitives[p]);
-        if (seen < 0)
-            goto done;
-        if (seen)
-            continue;
-        Py_ssize_t count = 0;
-        for (Py_ssize_t q = p; q < n; q++) {
-            if (!ok[q])
-                continue;
-            int same = PyObject_RichCompareBool(primitives[q], primitives[p], Py_EQ);
-            if (same < 0)
+        PyObject *group = PyDict_GetItemWithError(rows, primitives[p]); /* borrowed */
+        if (!group) {
+            if (PyErr_Occurred() || !(group = PyList_New(0)))
                 goto done;
-            if (same)
-                count++;
+            int failed = PyDict_SetItem(rows, primitives[p], group);
+            Py_DECREF(group); /* the dictionary holds it */
+            if (failed)
+                goto done;
         }
+        PyObject *index = PyLong_FromSsize_t(p);
+        if (!index || PyList_Append(group, index) < 0) {
+            Py_XDECREF(index);
+            goto done;
+        }
+        Py_DECREF(index);
+    }
+    Py_ssize_t at = 0;
+    PyObject *primitive, *group;
+    while (PyDict_Next(rows, &at, &primitive, &group)) { /* only values change: allowed */
+        Py_ssize_t count = PyList_GET_SIZE(group);
         PyObject *packed = PyBytes_FromStringAndSize(NULL, count * ROW_FLOATS * 4);
         if (!packed)
             goto done;
         float *out = (float *)PyBytes_AS_STRING(packed);
-        for (Py_ssize_t q = p; q < n; q++) {
-            if (!ok[q])
-                continue;
-            int same = PyObject_RichCompareBool(primitives[q], primitives[p], Py_EQ);
-            if (same < 0) {
-                Py_DECREF(packed);
-                goto done;
-            }
-            if (!same)
-                continue;
+        for (Py_ssize_t g = 0; g < count; g++) {
+            const double *row = floats + ROW_FLOATS * PyLong_AsSsize_t(PyList_GET_ITEM(group, g));
             for (int i = 0; i < ROW_FLOATS; i++)
-                *out++ = (float)floats[ROW_FLOATS * q + i];
+                *out++ = (float)row[i];
         }
-        int failed = PyDict_SetItem(rows, primitives[p], packed);
+        int failed = PyDict_SetItem(rows, primitive, packed);
         Py_DECREF(packed);
         if (failed)
             goto done;
