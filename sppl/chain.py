@@ -78,8 +78,8 @@ def evaluate_batch(requests) -> list[Trace | None]:
         log_prior = sampler.proposal_log_prior(proposal)
         if log_prior is None:
             continue
-        if proposal.move == "noise":  # the objects are the trace's: its statistics stand
-            out[i] = sampler.scored(proposal, log_prior, trace.stats, trace.renders)
+        if proposal.move == "noise":  # the objects are the trace's: no new render
+            out[i] = sampler.scored(proposal, log_prior, *sampler.rescored(trace, proposal))
         else:
             pending.append((i, log_prior))
     if not pending:
@@ -126,7 +126,7 @@ class Sampler:
         return self.make_trace(tuple(objects), noise)
 
     def make_trace(self, objects, noise) -> Trace:
-        stats, renders = self.scorer.evaluate(objects)
+        stats, renders = self.scorer.evaluate(objects, noise=noise)
         log_prior = objects_log_prior(self.model, objects) + noise_log_prior(self.model, noise)
         return Trace(
             self.model, tuple(objects), noise, stats, log_prior,
@@ -140,11 +140,17 @@ class Sampler:
         if log_prior is None:
             return None
         if proposal.move == "noise":
-            stats, renders = trace.stats, trace.renders
+            stats, renders = self.rescored(trace, proposal)
         else:
             # Given the current trace, the scorer re-renders only what the move changed.
             stats, renders = self.scorer.evaluate(proposal.objects, parent=trace)
         return self.scored(proposal, log_prior, stats, renders)
+
+    def rescored(self, trace: Trace, proposal: moves.Proposal):
+        """(stats, renders) of a noise move's state: the trace's own where its statistics
+        are sufficient for the noise (the Gaussian's), else re-scored by the scorer."""
+        rescore = getattr(self.scorer, "rescore", None)
+        return (trace.stats, trace.renders) if rescore is None else rescore(trace, proposal.noise)
 
     def evaluate_batch(self, requests) -> list[Trace | None]:
         """``evaluate`` of several (trace, proposal) pairs, rendered together where the scorer

@@ -5,7 +5,9 @@ A likelihood is split in two so that noise moves cost no rendering: ``statistics
 noise parameters into a log density. For the Gaussian, the statistics are the count of valid
 values and the sum of squared residuals, which is all the noise scale ever needs.
 
-Likelihoods are looked up by the name a model file gives (``likelihood gaussian``). Third-party
+Likelihoods are looked up by the name a model file gives (``likelihood gaussian``). The robust
+ones, ``mixture`` and ``student_t`` (``sppl.robust``), have no sufficient statistics: theirs
+are scored at given noise values. Third-party
 packages add their own through the ``sppl.likelihoods`` entry-point group: the entry point's
 name is the name used in model files, and it points at a class implementing ``Likelihood``.
 """
@@ -20,6 +22,7 @@ from typing import Protocol
 import numpy as np
 
 from .errors import SpplError
+from .robust import Mixture, StudentT
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -78,6 +81,15 @@ class Gaussian:
         return rendered + noise["sigma"] * eps
 
 
+def sample_observation(likelihood: Likelihood, rendered: np.ndarray, noise: Mapping[str, float],
+                       rng: np.random.Generator, depth_max: float) -> np.ndarray:
+    """``likelihood.sample``, given the sensor's range where the likelihood needs it (an
+    outlier is uniform over it)."""
+    if getattr(likelihood, "per_pixel", False):
+        return likelihood.sample(rendered, noise, rng, depth_max=depth_max)
+    return likelihood.sample(rendered, noise, rng)
+
+
 # The statistics that ``sppl.render.pixels`` computes on the GL side, keyed by the
 # ``statistics`` function they equal: "squared_residual" is (number of valid values, sum of
 # squared residuals over them). Keyed by the function, not by the likelihood class, so that a
@@ -88,11 +100,17 @@ _GPU_STATISTICS: dict[Callable, str] = {Gaussian.statistics: "squared_residual"}
 
 def gpu_statistics(likelihood: Likelihood) -> str | None:
     """Which GL-side computation gives this likelihood's statistics, or None if none does
-    (then scoring reads the renders back and calls ``statistics``)."""
+    (then scoring reads the renders back and calls ``statistics``). The robust likelihoods'
+    per-pixel terms are "pixel_log_density" (``shaders/likelihood.glsl``), for the classes of
+    ``sppl.robust`` whose per-pixel density the shader has (not for a subclass that changes it)."""
+    if type(likelihood) in (Mixture, StudentT):
+        return "pixel_log_density"
     return _GPU_STATISTICS.get(getattr(type(likelihood), "statistics", None))
 
 
-_BUILTIN: dict[str, Callable[..., Likelihood]] = {"gaussian": Gaussian}
+_BUILTIN: dict[str, Callable[..., Likelihood]] = {
+    "gaussian": Gaussian, "mixture": Mixture, "student_t": StudentT,
+}
 _registry: dict[str, Callable[..., Likelihood]] = dict(_BUILTIN)
 _plugins_loaded = False
 

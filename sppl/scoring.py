@@ -17,13 +17,14 @@ images themselves are then rendered only when something asks for them (``Renders
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
 from .camera import Camera
-from .errors import ObservationError
+from .errors import ObservationError, SpplError
 from .likelihoods import Likelihood, get_likelihood, gpu_statistics
 from .model import Model
 from .observations import Observations
@@ -78,28 +79,57 @@ class ReferenceScorer:
             )
         self.terms = terms
         self.cameras = {t.frame: t.camera for t in terms}
+        # The sensors whose likelihood is scored at given noise values (``sppl.robust``): their
+        # statistics hold those values, and a noise move re-scores them (``rescore``).
+        self.per_pixel = sorted(k for k, lik in self.likelihoods.items()
+                                if getattr(lik, "per_pixel", False))
 
-    def evaluate(self, objects, parent=None):
+    def evaluate(self, objects, parent=None, noise=None):
         """Render the objects for every camera; return the likelihood statistics of every term
         and the renders, as (stats, {frame: (rgb, depth)}). ``parent``, the trace the objects
-        were proposed from, lets a fast scorer work incrementally; this one ignores it."""
-        parts = self.parts(objects)
-        rendered = self.render(parts)
-        stats = {
-            (t.frame, t.kind): t.likelihood.statistics(
-                t.observed, rendered[t.frame][_OUTPUT[t.kind]], t.valid
-            )
-            for t in self.terms
-        }
+        were proposed from, lets a fast scorer work incrementally; this one ignores it. The
+        per-pixel likelihoods are scored at ``noise``, by default the parent's."""
+        noise = self._noise(parent, noise)
+        rendered = self.render(self.parts(objects))
+        stats = {(t.frame, t.kind): self.term_statistics(t, self.rendered(rendered, t), noise)
+                 for t in self.terms}
         return stats, rendered
+
+    def term_statistics(self, term: Term, rendered: np.ndarray, noise) -> np.ndarray:
+        """A term's statistics in numpy (at ``noise`` for a per-pixel likelihood)."""
+        if term.kind not in self.per_pixel:
+            return term.likelihood.statistics(term.observed, rendered, term.valid)
+        return term.likelihood.statistics(term.observed, rendered, term.valid, noise[term.kind],
+                                          depth_max=term.camera.depth_max)
+
+    def _noise(self, parent, noise):
+        if noise is None:
+            noise = getattr(parent, "noise", None)
+        if noise is None and self.per_pixel:
+            raise SpplError(f"the {', '.join(self.per_pixel)} likelihood is scored at given "
+                            "noise values: pass the noise, or the trace the objects come from")
+        return noise
 
     def evaluate_batch(self, requests):
         """``evaluate`` of several (objects, parent) pairs, in order. This path renders one
         hypothesis at a time; ``Scorer`` draws them together where it can."""
         return [self.evaluate(objects, parent=parent) for objects, parent in requests]
 
-    def statistics(self, objects) -> dict[tuple[int, str], np.ndarray]:
-        return self.evaluate(objects)[0]
+    def statistics(self, objects, noise=None) -> dict[tuple[int, str], np.ndarray]:
+        return self.evaluate(objects, noise=noise)[0]
+
+    def rescore(self, trace, noise):
+        """(stats, renders) of the trace's objects at other noise values: the trace's own
+        where every likelihood's statistics are sufficient for its noise (the Gaussian's),
+        else the per-pixel terms scored again from its renders."""
+        if all(trace.noise[k] == noise[k] for k in self.per_pixel):
+            return trace.stats, trace.renders
+        stats = dict(trace.stats)
+        for t in self.terms:
+            if t.kind in self.per_pixel:
+                stats[(t.frame, t.kind)] = ReferenceScorer.term_statistics(
+                    self, t, self.rendered(trace.renders, t), noise)
+        return stats, trace.renders
 
     def parts(self, objects) -> list:
         """What a hypothesis draws: the static scenery, then each object's parts in order."""
@@ -156,10 +186,11 @@ class _Pixels:
     parent's record and the rectangles it re-rendered; its own blocks are made when it
     becomes a parent in turn, so a rejected proposal costs no copy."""
 
-    __slots__ = ("blocks", "parent", "patches", "sums")
+    __slots__ = ("blocks", "key", "parent", "patches", "sums")
 
-    def __init__(self, sums, blocks=None, parent=None, patches=()) -> None:
+    def __init__(self, sums, blocks=None, parent=None, patches=(), key=None) -> None:
         self.sums, self.blocks, self.parent, self.patches = sums, blocks, parent, patches
+        self.key = key  # the noise values a per-pixel likelihood's terms were computed at
 
     def materialise(self) -> list:
         if self.blocks is None:
@@ -210,7 +241,12 @@ _INCREMENTAL_AREA = 0.6
 class Scorer(ReferenceScorer):
     """The fast path: per-pixel terms and their sums computed on the GL side, incrementally
     where a proposal changes a few objects. Same statistics as ``ReferenceScorer`` (to float32
-    rounding in the per-pixel terms; the sums are float64)."""
+    rounding in the per-pixel terms; the sums are float64).
+
+    A per-pixel likelihood's terms are computed at the noise values of the hypothesis they
+    score (its parent's, for a move of objects); a hypothesis's record keeps them (``key``),
+    and a proposal is scored incrementally only from a parent whose terms are at its own noise
+    values. A noise move re-runs the terms pass over the whole hypothesis (``rescore``)."""
 
     def __init__(self, model: Model, observations: Observations, renderer, fast: bool = True):
         super().__init__(model, observations, renderer)
@@ -231,7 +267,7 @@ class Scorer(ReferenceScorer):
         index = {f: i for i, f in enumerate(self.frames)}
         observed = {f: [None, None] for f in self.frames}
         self._constant = {}  # (frame, kind) -> (n, sum of squares against the empty scene)
-        background = np.asarray(renderer.settings.background, dtype="f4")
+        self._background = background = np.asarray(renderer.settings.background, dtype="f4")
         for t in self.terms:
             if t.kind == "image":
                 observed[t.frame][0] = t.observed
@@ -244,22 +280,39 @@ class Scorer(ReferenceScorer):
                 self._constant[(t.frame, t.kind)] = (int(valid.sum()), float(np.sum(r * r)))
         self._slot = {(t.frame, t.kind): (index[t.frame], 0 if t.kind == "image" else 1)
                       for t in self.terms}
-        # Per term: its key, its place in the flattened (cameras, 2) sums, its count of values
-        # and its sum of squares against the empty scene.
+        # Per Gaussian term: its key, its place in the flattened (cameras, 2) sums, its count of
+        # values and its sum of squares against the empty scene. Per per-pixel term: its key,
+        # its place, and the term (whose empty scene's log density depends on the noise).
         self._terms = [(k, 2 * c + kind, float(self._constant[k][0]), self._constant[k][1])
-                       for k, (c, kind) in self._slot.items()]
+                       for k, (c, kind) in self._slot.items() if k[1] not in self.per_pixel]
+        self._pixel_terms = [((t.frame, t.kind), 2 * self._slot[(t.frame, t.kind)][0]
+                              + self._slot[(t.frame, t.kind)][1], t)
+                             for t in self.terms if t.kind in self.per_pixel]
+        self._empty: dict[tuple, float] = {}  # (term key, noise key) -> the empty scene's
+        defines = {}
+        for kind, name in (("image", "IMAGE_TERM"), ("depth", "DEPTH_TERM")):
+            likelihood = self.likelihoods.get(kind)
+            if kind in self.per_pixel:
+                defines[name] = likelihood.shader_term
+                if kind == "depth" and likelihood.returns:
+                    defines["DEPTH_RETURNS"] = 1
+        self._noise_key = None  # the noise values the programs' uniforms hold
         self.pixels = PixelScorer(renderer.settings, [self.cameras[f] for f in self.frames],
-                                  [observed[f] for f in self.frames])
+                                  [observed[f] for f in self.frames], defines)
         self.draws = DrawCache([CameraBounds(self.cameras[f]) for f in self.frames])
         static = model.static_parts
         self._static = [self.draws.of_parts(static)] if static else []
         self._area = sum(c.width * c.height for c in self.cameras.values())
         self._token = object()
 
-    def evaluate(self, objects, parent=None):
+    def evaluate(self, objects, parent=None, noise=None):
         if self.pixels is None:
-            return super().evaluate(objects)
-        return self._from_parent(objects, parent) or self.evaluate_many([objects])[0]
+            return super().evaluate(objects, parent, noise)
+        noise = self._noise(parent, noise)
+        if not self._fast(noise):
+            return ReferenceScorer.evaluate(self, objects, noise=noise)
+        return (self._from_parent(objects, parent, noise)
+                or self.evaluate_many([objects], [noise])[0])
 
     def evaluate_batch(self, requests):
         """``evaluate`` of several (objects, parent) pairs, in order, with the same results:
@@ -267,32 +320,66 @@ class Scorer(ReferenceScorer):
         on their own), and all the others are drawn together before one read-back."""
         if self.pixels is None:
             return super().evaluate_batch(requests)
-        out = [self._from_parent(objects, parent) for objects, parent in requests]
+        noises = [self._noise(parent, None) for _, parent in requests]
+        out = [self._from_parent(objects, parent, noise) if self._fast(noise) else None
+               for (objects, parent), noise in zip(requests, noises)]
         full = [i for i, result in enumerate(out) if result is None]
         if full:
-            for i, result in zip(full, self.evaluate_many([requests[i][0] for i in full])):
+            results = self.evaluate_many([requests[i][0] for i in full], [noises[i] for i in full])
+            for i, result in zip(full, results):
                 out[i] = result
         return out
 
-    def _from_parent(self, objects, parent):
+    def rescore(self, trace, noise):
+        """``ReferenceScorer.rescore`` on the GL side: the terms pass run again over the
+        whole hypothesis at the new noise values (the Gaussian terms' statistics stand)."""
+        if (self.pixels is None or all(trace.noise[k] == noise[k] for k in self.per_pixel)
+                or not self._fast(noise)):
+            return super().rescore(trace, noise)
+        stats, renders = self.evaluate_many([trace.objects], [noise])[0]
+        return {k: (v if k[1] in self.per_pixel else trace.stats[k]) for k, v in stats.items()}, \
+            renders
+
+    def _from_parent(self, objects, parent, noise):
         """``evaluate``'s answer scored incrementally from the parent trace, or None where
-        there is no parent of this scorer's or a full render is cheaper."""
+        there is no parent of this scorer's, its terms are at other noise values, or a full
+        render is cheaper."""
         before = getattr(parent, "renders", None)
         if isinstance(before, Renders) and before.scorer is self and before.pixels is not None:
+            key = self._key(noise)
+            if before.pixels.key != key:
+                return None
+            if key is not None:
+                self._uniforms(noise, key)
             pixels = self._incremental(parent.objects, objects, before.pixels)
             if pixels is not None:
-                return self._stats(pixels.sums), Renders(self, objects, pixels)
+                return self._stats(pixels.sums, noise), Renders(self, objects, pixels)
         return None
 
-    def evaluate_many(self, hypotheses):
-        """``evaluate`` for several object sets, whole (no parent)."""
+    def evaluate_many(self, hypotheses, noises=None):
+        """``evaluate`` for several object sets, whole (no parent), each scored at its noise
+        values (needed by per-pixel likelihoods only)."""
+        if noises is None:
+            noises = [self._noise(None, None)] * len(hypotheses)
         if self.pixels is None:
-            return [super().evaluate(objects) for objects in hypotheses]
-        blocks, sums = self.pixels.render([self._drawn(objects) for objects in hypotheses])
+            return [super().evaluate(o, noise=n) for o, n in zip(hypotheses, noises)]
         out = []
-        for b, objects in enumerate(hypotheses):
-            flat = sums[b].ravel().tolist()
-            out.append((self._stats(flat), Renders(self, objects, _Pixels(flat, blocks[b]))))
+        # Hypotheses at the same noise values are drawn together: the uniforms hold one set.
+        i = 0
+        while i < len(hypotheses):
+            key = self._key(noises[i])
+            j = i + 1
+            while j < len(hypotheses) and self._key(noises[j]) == key:
+                j += 1
+            if key is not None:
+                self._uniforms(noises[i], key)
+            group = hypotheses[i:j]
+            blocks, sums = self.pixels.render([self._drawn(objects) for objects in group])
+            for b, objects in enumerate(group):
+                flat = sums[b].ravel().tolist()
+                out.append((self._stats(flat, noises[i]),
+                            Renders(self, objects, _Pixels(flat, blocks[b], key=key))))
+            i = j
         return out
 
     # -- helpers -------------------------------------------------------------------------------
@@ -300,9 +387,77 @@ class Scorer(ReferenceScorer):
     def _drawn(self, objects) -> list:
         return [*self._static, *(self.draws.of_object(o) for o in objects)]
 
-    def _stats(self, sums: list[float]) -> dict[tuple[int, str], np.ndarray]:
-        return {key: np.array((n, max(empty + sums[i], 0.0)))
-                for key, i, n, empty in self._terms}
+    def _stats(self, sums: list[float], noise=None) -> dict[tuple[int, str], np.ndarray]:
+        out = {key: np.array((n, max(empty + sums[i], 0.0)))
+               for key, i, n, empty in self._terms}
+        for key, i, t in self._pixel_terms:
+            values = noise[t.kind]
+            out[key] = np.array([*t.likelihood.key(values), self._empty_scene(key, t, values)
+                                 + sums[i]])
+        return out
+
+    def _key(self, noise) -> tuple | None:
+        """The noise values the per-pixel terms depend on (None: there are none)."""
+        if not self.per_pixel:
+            return None
+        return tuple(self.likelihoods[k].key(noise[k]) for k in self.per_pixel)
+
+    def _fast(self, noise) -> bool:
+        """Whether the GL side can score the per-pixel likelihoods at these noise values:
+        inside their support, with every uniform a finite float32 (a probability of exactly
+        0 or 1, or a scale beyond float32, goes to the float64 reference)."""
+        for kind in self.per_pixel:
+            likelihood = self.likelihoods[kind]
+            values = likelihood.values(noise[kind])
+            if not likelihood.in_support(values):
+                return False
+            if not np.all(np.isfinite(np.float32(self._kind_uniforms(kind, values, 8.0)))):
+                return False
+        return True
+
+    def _kind_uniforms(self, kind, values, depth_max):
+        likelihood = self.likelihoods[kind]
+        k, high = (3, 1.0) if kind == "image" else (1, depth_max)
+        with np.errstate(all="ignore"):
+            out = likelihood.uniforms(values, k, high)
+            if kind == "depth" and likelihood.returns:
+                m, q = values["missing"], values["missing_far"]
+                out = (*out, *(math.log(p) if p > 0.0 else -math.inf
+                               for p in (m, 1.0 - m, q, 1.0 - q)))
+        return out
+
+    def _uniforms(self, noise, key) -> None:
+        """Set every camera's per-pixel likelihood uniforms to these noise values."""
+        if key == self._noise_key:
+            return
+        for c, f in enumerate(self.frames):
+            camera = self.cameras[f]
+            uniforms = {}
+            for kind in self.per_pixel:
+                values = self.likelihoods[kind].values(noise[kind])
+                found = self._kind_uniforms(kind, values, float(camera.depth_max))
+                uniforms[f"{kind}_noise"] = tuple(found[:4])
+                if len(found) > 4:
+                    uniforms["depth_returns"] = tuple(found[4:])
+            self.pixels.set_noise(c, uniforms)
+        self._noise_key = key
+
+    def _empty_scene(self, key, term: Term, values) -> float:
+        """The log density of a term's observation given the empty scene, at these noise
+        values (numpy, float64; the GL-side terms are relative to it)."""
+        noise_key = term.likelihood.key(values)
+        found = self._empty.get((key, noise_key))
+        if found is None:
+            if term.kind == "image":
+                rendered = np.broadcast_to(self._background, term.observed.shape)
+            else:
+                rendered = np.full(term.observed.shape, np.float32(term.camera.depth_max))
+            found = term.likelihood.log_density(term.observed, rendered, term.valid, values,
+                                                term.camera.depth_max)
+            if len(self._empty) > 256:  # noise values visited long ago
+                self._empty.clear()
+            self._empty[(key, noise_key)] = found
+        return found
 
     def _incremental(self, old_objects, objects, before: _Pixels) -> _Pixels | None:
         """The new hypothesis's record from its parent's, re-rendering only the rectangles
@@ -342,7 +497,7 @@ class Scorer(ReferenceScorer):
                 sums[2 * c] += image
                 sums[2 * c + 1] += depth
                 kept.append((c, rect, patch))
-        return _Pixels(sums, parent=before, patches=tuple(kept))
+        return _Pixels(sums, parent=before, patches=tuple(kept), key=before.key)
 
 
 class PriorScorer:
@@ -352,7 +507,7 @@ class PriorScorer:
     terms: list[Term] = []
     cameras: dict = {}
 
-    def evaluate(self, objects, parent=None):
+    def evaluate(self, objects, parent=None, noise=None):
         return {}, {}
 
     def evaluate_batch(self, requests):

@@ -99,7 +99,7 @@ def render_observations(
     rng: np.random.Generator,
 ) -> list[Frame]:
     """Render each camera and add each modality's noise from the model's likelihoods."""
-    from .likelihoods import get_likelihood
+    from .likelihoods import get_likelihood, sample_observation
 
     parts = [*model.static_parts, *(p for o in objects for p in o.parts)]
     frames = []
@@ -109,15 +109,16 @@ def render_observations(
         frame_rgb = frame_depth = valid = None
         if "rgb" in modalities:
             s = model.sensors.get("image")
-            frame_rgb = rgb if s is None else get_likelihood(s.likelihood, s.options).sample(
-                rgb, noise["image"], rng)
+            frame_rgb = rgb if s is None else sample_observation(
+                get_likelihood(s.likelihood, s.options), rgb, noise["image"], rng, cam.depth_max)
             frame_rgb = np.clip(frame_rgb, 0.0, 1.0).astype(np.float32)
         if "depth" in modalities:
             s = model.sensors.get("depth")
-            frame_depth = depth if s is None else get_likelihood(s.likelihood, s.options).sample(
-                depth, noise["depth"], rng)
+            frame_depth = depth if s is None else sample_observation(
+                get_likelihood(s.likelihood, s.options), depth, noise["depth"], rng, cam.depth_max)
+            # A likelihood with a missing-return term marks the pixels with no return NaN.
+            valid = np.isfinite(frame_depth)
             frame_depth = np.clip(frame_depth, 0.0, cam.depth_max).astype(np.float32)
-            valid = np.ones(frame_depth.shape, dtype=bool)
         frames.append(Frame(camera=cam, rgb=frame_rgb, depth=frame_depth, depth_valid=valid))
     return frames
 

@@ -54,6 +54,7 @@ from .camera import Camera, focal_from_fov, look_at
 from .chain import Sampler
 from .domains import Finite, Integer
 from .errors import SpplError
+from .likelihoods import get_likelihood, sample_observation
 from .model import Model
 from .observations import CameraSpec, Frame, Observations
 from .scoring import PriorScorer, Scorer
@@ -622,8 +623,6 @@ class _Simulator:
     the checks need observations distributed exactly as the likelihood says."""
 
     def __init__(self, model: Model, specs: Sequence[CameraSpec], renderer) -> None:
-        from .likelihoods import get_likelihood
-
         self.model = model
         self.specs = list(specs)
         self.renderer = renderer
@@ -638,11 +637,14 @@ class _Simulator:
         for i, spec in enumerate(self.specs):
             rgb, depth = renders[i]
             frame = Frame(camera=spec.camera)
+            high = spec.camera.depth_max
             if "rgb" in spec.modalities:
-                frame.rgb = self.likelihoods["image"].sample(rgb, noise["image"], rng)
+                frame.rgb = sample_observation(self.likelihoods["image"], rgb, noise["image"],
+                                               rng, high)
             if "depth" in spec.modalities:
-                frame.depth = self.likelihoods["depth"].sample(depth, noise["depth"], rng)
-                frame.depth_valid = np.ones(depth.shape, dtype=bool)
+                frame.depth = sample_observation(self.likelihoods["depth"], depth,
+                                                 noise["depth"], rng, high)
+                frame.depth_valid = np.isfinite(frame.depth)  # NaN: no return
             frames.append(frame)
         return Observations(Path("."), frames)
 
@@ -675,10 +677,8 @@ def _trace_with(sampler: Sampler, objects, noise, renders, log_prior=None) -> Tr
     from .trace import noise_log_prior, objects_log_prior
 
     scorer = sampler.scorer
-    stats = {
-        (t.frame, t.kind): t.likelihood.statistics(t.observed, scorer.rendered(renders, t), t.valid)
-        for t in scorer.terms
-    }
+    stats = {(t.frame, t.kind): scorer.term_statistics(t, scorer.rendered(renders, t), noise)
+             for t in scorer.terms}
     if log_prior is None:
         log_prior = objects_log_prior(sampler.model, objects) + noise_log_prior(sampler.model, noise)
     return Trace(sampler.model, tuple(objects), noise, stats, log_prior,

@@ -25,7 +25,7 @@ class DegenerateScorer:
     terms: list = []
     cameras: dict = {}
 
-    def evaluate(self, objects, parent=None):
+    def evaluate(self, objects, parent=None, noise=None):
         return {(0, "x"): np.array([o.values["x"] for o in objects])}, {}
 
     def log_likelihood(self, stats, noise) -> float:

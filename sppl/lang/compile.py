@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from ..domains import Finite, Positive, Real
+from ..domains import Finite, Interval, Periodic, Positive, Real
 from ..errors import ModelError, ModelErrors, Span, SpplError
 from ..geometry import Part
 from ..model import (
@@ -119,6 +119,15 @@ class _PendingClass(_Owner):
 class _PendingSensor(_Owner):
     likelihood: str | None = None
     options: dict[str, float] = field(default_factory=dict)
+
+
+def _domain_within(domain, low: float, high: float) -> bool:
+    """Whether every value of a (continuous) domain lies in [low, high]."""
+    if isinstance(domain, Positive):
+        return low <= 0.0 and high == math.inf
+    if isinstance(domain, (Interval, Periodic)):
+        return low <= domain.low and domain.high <= high
+    return False
 
 
 def _scale_free(domain) -> bool:
@@ -687,7 +696,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
                 if item.key.text in pending.declared:
                     self.error(f"`{item.key.text}` is already a noise parameter", item.key.span)
                 elif self._first(("sensor", kind, item.key.text), item):
-                    value = self.expr.constant(item.value, self._global_scope())
+                    value = self._option(item.value)
                     if value is not None:
                         pending.options[item.key.text] = value
             elif item.name.text == "count":
@@ -731,7 +740,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
                 if key in pending.options:
                     self.error(f"the option `{key}` is given twice", arg.name.span)
                     continue
-                value = self.expr.constant(arg.value, self._global_scope())
+                value = self._option(arg.value)
                 if value is not None:
                     pending.options[key] = value
         try:
@@ -753,6 +762,20 @@ class _Compiler(ImportsMixin, ShapesMixin):
             self.error(f"the {name} likelihood cannot be made: {message}", node.span)
             return
         wanted = tuple(getattr(likelihood, "noise_parameters", ()) or ())
+        fixed = getattr(likelihood, "fixed", {})
+        supports = getattr(likelihood, "noise_supports", {})
+        for p in pending.parameters:
+            if p.name in supports:
+                low, high = supports[p.name]
+                if not _domain_within(p.domain, low, high):
+                    what = "a probability" if high == 1.0 else "positive"
+                    self.error(
+                        f"`{p.name}` of the {name} likelihood is {what}, in "
+                        f"[{low:g}, {high:g}], but its domain is {p.domain.describe()}",
+                        own[p.name].name.span,
+                        f"declare it as `{p.name} : interval(0, 1) ~ beta(1, 20)`"
+                        if high == 1.0 else f"declare it as `{p.name} : positive`",
+                    )
         for noise in wanted:
             if noise not in pending.declared:
                 self.error(
@@ -761,12 +784,25 @@ class _Compiler(ImportsMixin, ShapesMixin):
                     f"add a line such as `{noise} : positive ~ gamma(2, 0.1)` to sensor `{kind}`",
                 )
         for declared, item in own.items():
-            if isinstance(item, ast.Choice) and declared not in wanted:
+            if isinstance(item, ast.Choice) and declared in fixed:
+                self.error(
+                    f"`{declared}` is both fixed by an option and given a prior",
+                    item.name.span,
+                    f"drop the option `{declared} = ...` or the prior",
+                )
+            elif isinstance(item, ast.Choice) and declared not in wanted:
                 self.error(
                     f"the {name} likelihood has no noise parameter `{declared}`",
                     item.name.span,
                     did_you_mean(declared, wanted) or known("noise parameters", wanted),
                 )
+
+    def _option(self, value):
+        """A likelihood option's value: a number, or a word such as `laplace` (a bare name
+        that is not a constant of the model)."""
+        if isinstance(value, ast.Name) and value.id not in self.symbols:
+            return value.id
+        return self.expr.constant(value, self._global_scope())
 
     def _first(self, key: tuple[str, ...], node: ast.Setting | ast.Step) -> bool:
         """Whether this is the first time a setting is given, reporting a repeat if not."""

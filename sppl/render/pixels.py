@@ -23,7 +23,8 @@ still drawn.
 from __future__ import annotations
 
 import struct
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from importlib import resources
 from typing import TYPE_CHECKING
 
 import moderngl
@@ -91,10 +92,19 @@ class PixelScorer:
     minus the squared residual against the empty scene's render (background colour, depth_max).
     """
 
-    def __init__(self, settings: RenderSettings, cameras: Sequence[Camera], observed) -> None:
+    def __init__(self, settings: RenderSettings, cameras: Sequence[Camera], observed,
+                 terms: Mapping[str, int] | None = None) -> None:
         self.ctx = ctx = gl_context()
         self.compiled = compiled
         self.cameras = list(cameras)
+        # Which likelihood each modality's terms are (likelihood.glsl's defines; all 0: the
+        # Gaussian's), and per camera the robust ones' noise uniforms (``set_noise``).
+        terms = {"IMAGE_TERM": 0, "DEPTH_TERM": 0, "DEPTH_RETURNS": 0, **(terms or {})}
+        self._prelude = "".join(f"#define {k} {int(v)}\n" for k, v in terms.items())
+        if any(terms.values()):
+            self._prelude += resources.files(__package__).joinpath(
+                "shaders", "likelihood.glsl").read_text(encoding="utf-8")
+        self._noise: list[dict[str, tuple]] = [{} for _ in self.cameras]
         light = np.asarray(settings.light, dtype=float)
         # Each camera's observation stays bound to a texture unit of its own (while there
         # are units enough), so that a pass need not bind it.
@@ -213,6 +223,20 @@ class PixelScorer:
             self._ones = np.ones(n)
         return self._ones[:n] @ flat
 
+    def set_noise(self, c: int, uniforms: Mapping[str, tuple]) -> None:
+        """Camera c's robust likelihoods' noise uniforms (likelihood.glsl's image_noise,
+        depth_noise, depth_returns), for the passes that follow."""
+        self._noise[c] = dict(uniforms)
+        for found in self._programs[c].values():
+            self._write(found, uniforms)
+
+    @staticmethod
+    def _write(found: moderngl.Program, uniforms: Mapping[str, tuple]) -> None:
+        for name, value in uniforms.items():
+            member = found.get(name, None)  # the compiler drops a uniform a program never reads
+            if member is not None:
+                member.value = value
+
     def release(self) -> None:
         for fbo, objects in self._targets:
             fbo.release()
@@ -307,7 +331,9 @@ class PixelScorer:
         found = self._programs[c].get(kind)
         if found is None:
             camera, settings = self.cameras[c], self._settings
-            found = self._programs[c][kind] = program(self.ctx, "terms.vert", "terms.frag", kind)
+            found = self._programs[c][kind] = program(self.ctx, "terms.vert", "terms.frag", kind,
+                                                      self._prelude)
+            self._write(found, self._noise[c])
             found["light"].value = self._light
             found["ambient"].value = float(settings.ambient)
             found["background"].value = tuple(float(x) for x in settings.background)

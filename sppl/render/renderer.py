@@ -46,9 +46,12 @@ def shape(primitive: str) -> str | None:
     return primitive if primitive in RAY_CAST else None
 
 
-def _shader(name: str, shape: str | None = None) -> str:
+def _shader(name: str, shape: str | None = None, prelude: str = "") -> str:
     """A shader's source; with a ``shape`` of RAY_CAST, its variant that ray-casts it."""
     text = resources.files(__package__).joinpath("shaders", name).read_text(encoding="utf-8")
+    if prelude:
+        version, _, body = text.partition("\n")
+        text = f"{version}\n{prelude}\n{body}"
     if shape is None:
         return text
     version, _, body = text.partition("\n")
@@ -57,12 +60,12 @@ def _shader(name: str, shape: str | None = None) -> str:
 
 
 def program(ctx: moderngl.Context, vertex: str, fragment: str,
-            shape: str | None = None) -> moderngl.Program:
+            shape: str | None = None, prelude: str = "") -> moderngl.Program:
     """The program of a pair of shaders that draws meshes (``shape`` None) or ray-casts a
-    round shape."""
+    round shape; ``prelude`` is GLSL put at the top of the fragment shader."""
     try:
         return ctx.program(vertex_shader=_shader(vertex, shape),
-                           fragment_shader=_shader(fragment, shape))
+                           fragment_shader=_shader(fragment, shape, prelude))
     except moderngl.Error as error:
         raise RenderError(f"the shaders {vertex} and {fragment} did not compile on this GL "
                           f"driver: {error}") from None

@@ -1,9 +1,10 @@
 #version 330
 
 // Shades a fragment as scene.frag does, then writes its pixel's likelihood term instead of its
-// colour: for each modality, (observed - rendered)^2 minus (observed - background)^2. Pixels no
-// part covers keep the cleared 0, so the image's sum is the sum of squared residuals less that
-// of the empty scene, which is computed once on the CPU.
+// colour: for each modality, (observed - rendered)^2 minus (observed - background)^2, or for a
+// robust likelihood (likelihood.glsl, put above this by pixels.py) its log density at the
+// rendering less at the background. Pixels no part covers keep the cleared 0, so the image's
+// sum is the statistic less that of the empty scene, which is computed on the CPU.
 uniform vec3 light;
 uniform float ambient;
 uniform bool ray_depth;
@@ -45,15 +46,26 @@ void main() {
     vec4 o = texelFetch(observed, ivec2(gl_FragCoord.xy), 0);
     float image = 0.0;
     if (o.r > MISSING_BELOW) {
+#if IMAGE_TERM != 0
+        image = image_density(o.rgb, colour) - image_density(o.rgb, background);
+#else
         vec3 a = o.rgb - colour;
         vec3 b = o.rgb - background;
         image = dot(a, a) - dot(b, b);
+#endif
     }
     float range = 0.0;
+#if DEPTH_TERM != 0
+    // A robust likelihood's term: the pixel's log density less the empty scene's.
+    bool present = o.a > MISSING_BELOW;
+    range = depth_density(o.a, present, depth, depth_max)
+          - depth_density(o.a, present, depth_max, depth_max);
+#else
     if (o.a > MISSING_BELOW) {
         float a = o.a - depth;
         float b = o.a - depth_max;
         range = a * a - b * b;
     }
+#endif
     out_terms = vec2(image, range);
 }
