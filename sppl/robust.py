@@ -34,6 +34,7 @@ likelihood.glsl`` computes the same per-pixel terms on the GL side.
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Mapping
 
@@ -72,16 +73,16 @@ class _PerPixel:
         known = (*self._parameters, *self._words, "missing", "missing_far")
         for key, value in options.items():
             if key not in known:
-                raise SpplError(f"the {self.name} likelihood has no option `{key}`; its options"
-                                f" are {', '.join(known)}")
+                close = difflib.get_close_matches(key, known, n=1)
+                hint = f" (did you mean `{close[0]}`?)" if close else ""
+                raise SpplError(f"no option `{key}`{hint}; the options are {', '.join(known)}")
             words = _WORDS.get(key)
             if words is not None:
                 if value not in words:
-                    raise SpplError(f"the option `{key}` of the {self.name} likelihood is one "
-                                    f"of {', '.join(words)}, got {value!r}")
+                    raise SpplError(f"the option `{key}` is one of {', '.join(words)}, got "
+                                    f"`{value}`")
             elif isinstance(value, str) or not math.isfinite(float(value)):
-                raise SpplError(f"the option `{key}` of the {self.name} likelihood is a number,"
-                                f" got {value!r}")
+                raise SpplError(f"the option `{key}` is a number, got `{value}`")
             elif key in _PROBABILITIES and not 0.0 <= float(value) <= 1.0:
                 raise SpplError(f"`{key}` is a probability and must lie in [0, 1], got {value:g}")
             elif key in ("sigma", "nu") and not float(value) > 0.0:

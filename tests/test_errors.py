@@ -59,6 +59,13 @@ def observations(d: Path, frame=(), top=(), rgb=None, depth=None, depth_name="de
     (d / "obs" / "transforms.json").write_text(json.dumps(transforms))
 
 
+def _depth_sensor(body: str) -> str:
+    """The shipped model with another depth sensor."""
+    old = "sensor depth {\n    likelihood gaussian\n    sigma : positive ~ gamma(2, 0.1)\n}"
+    assert old in MODEL
+    return MODEL.replace(old, "sensor depth {\n    " + body + "\n}")
+
+
 def model_file(d: Path, text: str = MODEL) -> None:
     (d / "model.scn").write_text(text, encoding="utf-8")
 
@@ -189,6 +196,26 @@ CASES = [
     Case("model-no-geometry", "class with no geometry", ["check", "model.scn"],
          lambda d: model_file(d, "class cube {\n    count ~ poisson(1)\n    x : real ~ "
                                  "normal(0, 1)\n}\n"), "geometry", excerpt=True),
+    Case("likelihood-option", "likelihood: unknown option", ["check", "model.scn"],
+         lambda d: model_file(d, _depth_sensor("likelihood mixture(outliers = 0.1)\n    "
+                                               "sigma : positive ~ gamma(2, 0.1)")),
+         "has no option `outliers`", excerpt=True),
+    Case("likelihood-outlier-value", "likelihood: outlier probability outside [0, 1]",
+         ["check", "model.scn"],
+         lambda d: model_file(d, _depth_sensor("likelihood mixture(outlier = 1.5)\n    "
+                                               "sigma : positive ~ gamma(2, 0.1)")),
+         "must lie in [0, 1]", excerpt=True),
+    Case("likelihood-outlier-domain", "likelihood: outlier prior reaching outside [0, 1]",
+         ["check", "model.scn"],
+         lambda d: model_file(d, _depth_sensor("likelihood mixture\n    sigma : positive ~ "
+                                               "gamma(2, 0.1)\n    outlier : positive ~ "
+                                               "gamma(1, 0.1)")),
+         "is a probability", excerpt=True),
+    Case("likelihood-no-prior", "likelihood: noise parameter without a prior",
+         ["check", "model.scn"],
+         lambda d: model_file(d, _depth_sensor("likelihood mixture\n    sigma : positive ~ "
+                                               "gamma(2, 0.1)")),
+         "needs a prior for its noise parameter `outlier`", excerpt=True),
     # -- observation folders ------------------------------------------------------------------
     Case("obs-missing", "observation folder missing", SAMPLE, model_file, "not found"),
     Case("obs-empty", "observation folder empty", SAMPLE,

@@ -781,6 +781,8 @@ class _Compiler(ImportsMixin, ShapesMixin):
                 self.error(
                     f"the {name} likelihood needs a prior for its noise parameter `{noise}`",
                     node.span,
+                    f"add a line such as `{noise} : interval(0, 1) ~ beta(1, 20)` to sensor "
+                    f"`{kind}`" if supports.get(noise, (0, 0))[1] == 1.0 else
                     f"add a line such as `{noise} : positive ~ gamma(2, 0.1)` to sensor `{kind}`",
                 )
         for declared, item in own.items():

@@ -1,0 +1,353 @@
+"""The robust likelihoods (sppl/robust.py): their numpy densities against scipy, their samplers
+against their densities, their GL-side terms against the numpy twin (absolute nats), and the
+sampler's checks with them in the loop.
+
+Statistical tests run at fixed seeds; each states its false-alarm rate over seeds.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+from test_fast_scoring import SPECS
+
+from sppl import cli
+from sppl.chain import Sampler
+from sppl.errors import SpplError
+from sppl.lang import load_model
+from sppl.likelihoods import get_likelihood, gpu_statistics, register_likelihood
+from sppl.observations import Observations, load_observations
+from sppl.render import Renderer
+from sppl.robust import Mixture, StudentT
+from sppl.scoring import ReferenceScorer, Scorer
+from sppl.simulate import render_observations, sample_noise, sample_objects
+
+FIXTURES = Path(__file__).resolve().parent / "fixtures" / "robust"
+# Absolute tolerance of the GL-side log density against the numpy twin, per term: float32
+# rounding of per-pixel terms of a few nats, over a few thousand pixels (measured: < 1e-3).
+NATS = 1e-2
+
+
+def _pixels(rng, shape, high=8.0):
+    rendered = rng.uniform(0.5, high - 0.5, size=shape)
+    observed = rendered + rng.normal(0, 0.05, size=shape)
+    outliers = rng.random(shape[:2]) < 0.2
+    observed[outliers] = rng.uniform(0, high, size=observed[outliers].shape)
+    return observed, rendered
+
+
+# -- the numpy densities -------------------------------------------------------------------------
+
+
+def test_depth_mixture_matches_scipy_and_masks_missing_pixels():
+    rng = np.random.default_rng(0)
+    observed, rendered = _pixels(rng, (9, 11))
+    observed[0, :3] = [-0.2, 8.5, 9.0]  # outside the range: the inlier alone scores them
+    valid = rng.random(observed.shape) > 0.2
+    w, sigma = 0.15, 0.07
+    inlier = np.log1p(-w) + stats.norm.logpdf(observed, rendered, sigma)
+    in_range = (observed >= 0) & (observed <= 8.0)
+    outlier = np.where(in_range, math.log(w / 8.0), -np.inf)
+    expected = np.logaddexp(inlier, outlier)[valid].sum()
+    lik = Mixture()
+    got = lik.log_density(observed, rendered, valid, {"sigma": sigma, "outlier": w}, 8.0)
+    assert got == pytest.approx(expected, abs=1e-9)
+
+
+def test_image_mixture_with_a_laplace_inlier_matches_scipy():
+    rng = np.random.default_rng(1)
+    rendered = rng.random((5, 6, 3))
+    observed = np.clip(rendered + rng.laplace(0, 0.04, rendered.shape), -0.1, 1.1)
+    w, sigma = 0.3, 0.04
+    inlier = np.log1p(-w) + stats.laplace.logpdf(observed, rendered, sigma).sum(-1)
+    in_range = ((observed >= 0) & (observed <= 1)).all(-1)
+    expected = np.logaddexp(inlier, np.where(in_range, math.log(w), -np.inf)).sum()
+    lik = Mixture(inlier="laplace")
+    got = lik.log_density(observed, rendered, None, {"sigma": sigma, "outlier": w})
+    assert got == pytest.approx(expected, abs=1e-9)
+
+
+def test_student_t_matches_scipy_per_value_and_per_pixel():
+    rng = np.random.default_rng(2)
+    observed, rendered = _pixels(rng, (7, 8))
+    lik = StudentT()
+    noise = {"sigma": 0.05, "nu": 3.5}
+    expected = stats.t.logpdf(observed, 3.5, rendered, 0.05).sum()
+    assert lik.log_density(observed, rendered, None, noise, 8.0) == pytest.approx(expected,
+                                                                                  abs=1e-9)
+    rgb_r, rgb_o = rng.random((3, 4, 3)), rng.random((3, 4, 3))
+    expected = sum(stats.multivariate_t.logpdf(rgb_o[i, j], rgb_r[i, j], 0.05**2 * np.eye(3),
+                                               df=3.5)
+                   for i in range(3) for j in range(4))
+    assert lik.log_density(rgb_o, rgb_r, None, noise) == pytest.approx(expected, abs=1e-9)
+
+
+def test_the_missing_return_term_scores_every_pixel_by_what_the_render_shows():
+    """Missing where a surface is in range: log missing; missing where none is: log
+    missing_far; a return: log(1 - that) plus the value's density."""
+    observed = np.array([[2.0, 0.0, 7.9, 0.0]])
+    valid = np.array([[True, False, True, False]])
+    rendered = np.array([[2.1, 2.1, 8.0, 8.0]], dtype=np.float32)  # 8.0: nothing in range
+    noise = {"sigma": 0.1, "nu": 5.0, "missing": 0.2, "missing_far": 0.7}
+    lik = StudentT(returns="modelled")
+    near = float(rendered[0, 0])
+
+    def t(o, r):
+        return stats.t.logpdf(o, 5.0, r, 0.1)
+
+    expected = (math.log(0.8) + t(2.0, near) + math.log(0.2)
+                + math.log(0.3) + t(7.9, 8.0) + math.log(0.7))
+    assert lik.log_density(observed, rendered, valid, noise, 8.0) == pytest.approx(expected,
+                                                                                   abs=1e-9)
+    # Without the term the missing pixels are masked, as the Gaussian masks them.
+    masked = StudentT().log_density(observed, rendered, valid, noise, 8.0)
+    assert masked == pytest.approx(t(2.0, near) + t(7.9, 8.0), abs=1e-9)
+
+
+@pytest.mark.parametrize("sigma", [1e-300, 5e-324, 0.0, -1.0, math.nan, math.inf])
+def test_extreme_noise_gives_a_number_or_minus_infinity_never_an_error(sigma):
+    rng = np.random.default_rng(3)
+    observed, rendered = _pixels(rng, (4, 5))
+    for lik, noise in ((Mixture(), {"outlier": 0.1}), (StudentT(), {"nu": 2.0}),
+                       (Mixture(returns="modelled"), {"outlier": 0.0, "missing": 1.0,
+                                                      "missing_far": 0.0})):
+        got = lik.log_density(observed, rendered, None, {"sigma": sigma, **noise}, 8.0)
+        assert not math.isnan(got)
+        assert got < math.inf
+    # An outlier share keeps the density finite however small the inlier's scale.
+    assert math.isfinite(Mixture().log_density(observed, rendered, None,
+                                               {"sigma": 1e-300, "outlier": 0.1}, 8.0))
+    assert Mixture().log_density(observed, rendered, None, {"sigma": 0.1, "outlier": 1.2},
+                                 8.0) == -math.inf
+
+
+def test_statistics_are_bound_to_their_noise_values():
+    rng = np.random.default_rng(4)
+    observed, rendered = _pixels(rng, (4, 5))
+    lik = Mixture(outlier=0.1)  # a fixed outlier share is no noise parameter
+    assert lik.noise_parameters == ("sigma",)
+    s = lik.statistics(observed, rendered, None, {"sigma": 0.2}, depth_max=8.0)
+    assert lik.log_prob(s, {"sigma": 0.2}) == s[-1]
+    with pytest.raises(SpplError, match="scored at noise"):
+        lik.log_prob(s, {"sigma": 0.3})
+    with pytest.raises(SpplError, match="at given noise values"):
+        lik.statistics(observed, rendered, None)
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"outliers": 0.1}, "did you mean `outlier`"),
+    ({"outlier": 1.5}, r"must lie in \[0, 1\]"),
+    ({"outlier": -0.1}, r"must lie in \[0, 1\]"),
+    ({"inlier": "cauchy"}, "one of gaussian, laplace"),
+    ({"missing": 0.1}, "returns = modelled"),
+    ({"sigma": 0.0}, "must be positive"),
+])
+def test_bad_options_are_one_line_errors(options, message):
+    with pytest.raises(SpplError, match=message):
+        get_likelihood("mixture", options)
+
+
+# -- the samplers ----------------------------------------------------------------------------------
+
+
+def test_mixture_samples_outliers_at_their_rate_and_over_the_range():
+    """Of 200x200 pixels rendered at 2 m with sigma 1 cm and outlier share 0.3, those more
+    than 10 cm off are the outliers outside 2 +- 0.1: 0.3 (1 - 0.2 / 8) of them. Five
+    standard errors: a false alarm once in 1.7 million seeds."""
+    rendered = np.full((200, 200), 2.0, np.float32)
+    noise = {"sigma": 0.01, "outlier": 0.3}
+    out = Mixture().sample(rendered, noise, np.random.default_rng(5), depth_max=8.0)
+    far = np.abs(out - 2.0) > 0.1
+    p = 0.3 * (1 - 0.2 / 8.0)
+    assert far.mean() == pytest.approx(p, abs=5 * math.sqrt(p * (1 - p) / far.size))
+    assert 0.0 <= out[far].min() and out[far].max() <= 8.0
+    # RGB: a pixel is an outlier as a whole, uniform on the unit cube. Its channels are all
+    # more than 0.01 off but where one lands within 0.01 by chance (2% each): all or none
+    # off in 1 - 0.5 (1 - 0.98^3 - 0.02^3) = 97.1% of pixels, 12 standard errors above 95%
+    # (outliers per channel would make it 1 - 0.5 * 3/4 = 62.5%).
+    rgb = Mixture().sample(np.full((100, 100, 3), 0.5), {"sigma": 1e-3, "outlier": 0.5},
+                           np.random.default_rng(6))
+    off = np.abs(rgb - 0.5) > 0.01
+    assert (off.any(-1) == off.all(-1)).mean() > 0.95
+
+
+def test_student_t_samples_have_its_distribution():
+    """Kolmogorov-Smirnov of 4000 depth draws against the Student-t; false alarm 0.1%."""
+    rendered = np.full((40, 100), 3.0)
+    out = StudentT().sample(rendered, {"sigma": 0.05, "nu": 2.5}, np.random.default_rng(7),
+                            depth_max=8.0)
+    assert stats.kstest(out.ravel(), stats.t(2.5, 3.0, 0.05).cdf).pvalue > 1e-3
+    # Per pixel the three channels share one scale: a multivariate t, whose squared norm
+    # over 3 sigma^2 is F(3, nu) distributed.
+    rgb = StudentT().sample(np.zeros((40, 100, 3)), {"sigma": 0.05, "nu": 2.5},
+                            np.random.default_rng(8))
+    f = (rgb**2).sum(-1).ravel() / (3 * 0.05**2)
+    assert stats.kstest(f, stats.f(3, 2.5).cdf).pvalue > 1e-3
+
+
+def test_missing_returns_are_sampled_by_what_the_render_shows():
+    """Rates 0.1 on the surface half and 0.6 on the far half, 20,000 pixels each; five
+    standard errors (false alarm about one in a million seeds)."""
+    rendered = np.concatenate([np.full((100, 200), 2.0), np.full((100, 200), 8.0)]).astype("f4")
+    noise = {"sigma": 0.05, "outlier": 0.1, "missing": 0.1, "missing_far": 0.6}
+    out = Mixture(returns="modelled").sample(rendered, noise, np.random.default_rng(9),
+                                              depth_max=8.0)
+    for half, p in ((out[:100], 0.1), (out[100:], 0.6)):
+        assert np.isnan(half).mean() == pytest.approx(p, abs=5 * math.sqrt(p * (1 - p) / 2e4))
+
+
+# -- the GL side against the numpy twin ------------------------------------------------------------
+
+
+def _setting(root, name, seed=0):
+    model = load_model(FIXTURES / name)
+    renderer = Renderer(model.render)
+    rng = np.random.default_rng(seed)
+    truth = sample_objects(model, rng)
+    noise = sample_noise(model, rng)
+    frames = render_observations(model, truth, noise, SPECS, renderer, rng)
+    for frame in frames:
+        if frame.depth is not None:  # a block of missing pixels as well as the sampled ones
+            frame.depth_valid[5:20, 10:30] = False
+            frame.depth[~frame.depth_valid] = np.nan
+    return model, renderer, Observations(root, frames), truth, noise
+
+
+def _agree(fast_stats, ref_stats, scorer, noise):
+    """Per-pixel terms to NATS; a Gaussian's statistics as tests/test_fast_scoring.py
+    holds them (1e-4 relative)."""
+    assert fast_stats.keys() == ref_stats.keys()
+    for key, ref in ref_stats.items():
+        if key[1] in scorer.per_pixel:
+            assert fast_stats[key][:-1].tolist() == ref[:-1].tolist()  # the same noise values
+            assert fast_stats[key][-1] == pytest.approx(ref[-1], abs=NATS), key
+        else:
+            assert fast_stats[key][0] == ref[0]
+            assert fast_stats[key][1] == pytest.approx(ref[1], rel=1e-4, abs=1e-6)
+    assert scorer.log_likelihood(fast_stats, noise) == pytest.approx(
+        scorer.log_likelihood(ref_stats, noise), rel=1e-4, abs=NATS * len(ref_stats))
+
+
+MODELS = ["mixture.scn", "student_t.scn", "mixed.scn"]
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_gl_terms_equal_the_numpy_twin(require_gl, root, name):
+    model, renderer, obs, truth, noise = _setting(root, name)
+    fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
+    assert fast.pixels is not None and fast.per_pixel
+    for seed in range(3):
+        objects = truth if seed == 0 else sample_objects(model, np.random.default_rng(seed))
+        for n in (noise, sample_noise(model, np.random.default_rng(10 + seed))):
+            _agree(fast.statistics(objects, n), ref.statistics(objects, n), ref, n)
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_a_chain_on_the_fast_path_scores_every_state_as_the_reference(require_gl, root, name,
+                                                                       monkeypatch):
+    """Moves scored incrementally, noise moves re-scored on the GL side: every state the
+    chain keeps is the reference's at its noise values."""
+    model, renderer, obs, truth, _ = _setting(root, name)
+    fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
+    used = {"incremental": 0, "rescore": 0}
+    incremental, rescore = Scorer._incremental, Scorer.rescore
+
+    def counted_incremental(self, *args):
+        found = incremental(self, *args)
+        used["incremental"] += found is not None
+        return found
+
+    def counted_rescore(self, trace, noise):
+        used["rescore"] += 1
+        return rescore(self, trace, noise)
+
+    monkeypatch.setattr(Scorer, "_incremental", counted_incremental)
+    monkeypatch.setattr(Scorer, "rescore", counted_rescore)
+    sampler = Sampler(model, fast, np.random.default_rng(11))
+    trace = sampler.initial_trace(truth)
+    for _ in range(6):
+        trace = sampler.sweep(trace)
+        _agree(trace.stats, ref.statistics(trace.objects, trace.noise), ref, trace.noise)
+        assert trace.log_likelihood == fast.log_likelihood(trace.stats, trace.noise)
+    assert used["incremental"] > 0 and used["rescore"] > 0
+
+
+def test_noise_values_the_gl_side_cannot_hold_go_to_the_reference(require_gl, root):
+    """An outlier share of exactly 0 has log 0 in its terms: scored in float64 instead."""
+    model, renderer, obs, truth, noise = _setting(root, "mixture.scn")
+    fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
+    noise = {k: dict(v) for k, v in noise.items()}
+    noise["image"]["outlier"] = 0.0
+    assert not fast._fast(noise)
+    _agree(fast.statistics(truth, noise), ref.statistics(truth, noise), ref, noise)
+
+
+def test_a_subclass_with_another_density_leaves_the_gl_side():
+    class Other(Mixture):
+        def _value(self, *args):
+            return super()._value(*args)
+
+    assert gpu_statistics(Mixture()) == "pixel_log_density"
+    assert gpu_statistics(Other()) is None
+
+
+# -- sppl simulate and sppl verify -----------------------------------------------------------------
+
+
+def test_sppl_simulate_draws_from_the_robust_likelihoods(require_gl, tmp_path):
+    cameras = tmp_path / "cameras.json"
+    cameras.write_text(json.dumps({
+        "w": 32, "h": 32, "fl_x": 36.0, "fl_y": 36.0, "cx": 16.0, "cy": 16.0, "depth_max": 8.0,
+        "frames": [{"name": "both", "modalities": ["rgb", "depth"],
+                    "look_at": {"eye": [3.0, -2.5, 2.4], "target": [0, 0, 0.3], "up": [0, 0, 1]}}],
+    }))
+    for name in ("mixture.scn", "student_t.scn"):
+        out = tmp_path / name
+        code = cli.main(["simulate", str(FIXTURES / name), "--cameras", str(cameras),
+                         "--out", str(out), "--seed", "2"])
+        assert code == 0
+        frame = load_observations(out).frames[0]
+        assert frame.rgb is not None and (~frame.depth_valid).any()  # missing returns
+
+
+class MisnormalisedMixture(Mixture):
+    """A mixture whose outlier term is ten times a uniform density (so it integrates to
+    more than one), with the right simulator: a wrong density the language cannot see."""
+
+    def _value(self, dist, in_range, values, k, high):
+        return super()._value(dist, in_range, values, k, high / 10.0)
+
+
+def test_sppl_verify_passes_with_the_mixture(require_gl, capsys):
+    """Every check of `sppl verify`, short runs (the long ones are slow tests below); all of
+    the table at a family-wise false-alarm rate of 1%."""
+    code = cli.main(["verify", str(FIXTURES / "balls_mixture.scn"), "--steps", "500",
+                     "--geweke-chains", "40", "--geweke-length", "10", "--seed", "0"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "geweke  depth.missing_far" in out and "noise: reverse undoes it" in out
+
+
+def test_sppl_verify_catches_a_misnormalised_mixture(require_gl, capsys):
+    """The deliberately wrong density: Geweke's test names the outlier share (p about 1e-9
+    at this seed, where the table's threshold is 1% over all its rows)."""
+    register_likelihood("misnormalised_mixture", MisnormalisedMixture)
+    code = cli.main(["verify", str(FIXTURES / "broken_mixture.scn"), "--steps", "500",
+                     "--geweke-chains", "40", "--geweke-length", "8", "--seed", "0"])
+    out = capsys.readouterr().out
+    assert code == 1, out
+    assert "FAIL: " in out and "geweke: depth.outlier" in out.splitlines()[-1]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["balls_mixture.scn", "balls_student_t.scn"])
+def test_sppl_verify_passes_with_each_robust_likelihood_long(require_gl, capsys, name):
+    code = cli.main(["verify", str(FIXTURES / name), "--steps", "20000",
+                     "--geweke-chains", "300", "--geweke-length", "20", "--seed", "1"])
+    out = capsys.readouterr().out
+    assert code == 0, out
