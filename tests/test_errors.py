@@ -199,7 +199,7 @@ CASES = [
     Case("likelihood-option", "likelihood: unknown option", ["check", "model.scn"],
          lambda d: model_file(d, _depth_sensor("likelihood mixture(outliers = 0.1)\n    "
                                                "sigma : positive ~ gamma(2, 0.1)")),
-         "has no option `outliers`", excerpt=True),
+         "no option `outliers`", excerpt=True),
     Case("likelihood-outlier-value", "likelihood: outlier probability outside [0, 1]",
          ["check", "model.scn"],
          lambda d: model_file(d, _depth_sensor("likelihood mixture(outlier = 1.5)\n    "
