@@ -16,6 +16,11 @@ circle, every camera recording RGB and depth (Gaussian likelihood over every pix
   neither renderer is compared at a setting the other does not get;
 - incremental: a single-object parameter move scored from the current state
   (Scorer.evaluate with the parent trace), against full rescoring by each path.
+Then, at the same setting, the fast path with each sensor likelihood (``likelihoods``): the
+Gaussian, the inlier/outlier mixture and Student-t on both sensors (sppl/robust.py), a whole
+scene and a single-object move each, interleaved, and each robust one's time against the
+Gaussian's; and a noise move, which for the robust ones re-runs the terms pass over the whole
+scene (for the Gaussian it costs nothing: its statistics are sufficient).
 The memory floor is the time to read the observation arrays once (a sum over each).
 
 Every rate is the median of --repeats runs of at least --seconds each. The paths run
@@ -34,6 +39,7 @@ import math
 import statistics
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +52,9 @@ import panda3d_path  # noqa: E402
 
 from sppl.camera import Camera, focal_from_fov, look_at  # noqa: E402
 from sppl.chain import Sampler  # noqa: E402
+from sppl.distributions import Beta, Gamma  # noqa: E402
+from sppl.domains import Interval, Positive  # noqa: E402
+from sppl.model import Parameter, Sensor  # noqa: E402
 from sppl.lang import load_model  # noqa: E402
 from sppl.observations import CameraSpec, Observations  # noqa: E402
 from sppl.render import Renderer, kernels, renderer_string  # noqa: E402
@@ -54,6 +63,15 @@ from sppl.simulate import render_observations  # noqa: E402
 from sppl.trace import make_object  # noqa: E402
 
 NOISE = {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}}
+# The robust likelihoods compared with the Gaussian: (model file's likelihood, options, the
+# extra noise parameters' (domain, prior), noise values).
+LIKELIHOODS = {
+    "gaussian": ("gaussian", {}, {}, {"sigma": 0.05}),
+    "mixture": ("mixture", {}, {"outlier": (Interval(0.0, 1.0), Beta(1.0, 20.0))},
+                {"sigma": 0.05, "outlier": 0.05}),
+    "student_t": ("student_t", {}, {"nu": (Positive(), Gamma(4.0, 1.0))},
+                  {"sigma": 0.05, "nu": 3.0}),
+}
 BATCH = 16
 MOVES = 32
 
@@ -182,6 +200,34 @@ def anew(objects):
     return objects
 
 
+def with_likelihood(model, name):
+    """The model with both sensors' likelihood replaced by LIKELIHOODS[name], and its noise."""
+    likelihood, options, extra, values = LIKELIHOODS[name]
+    sensors = {}
+    for kind, sensor in model.sensors.items():
+        noise = (*sensor.noise, *(Parameter(p, d, prior, 0.05) for p, (d, prior) in extra.items()))
+        sensors[kind] = Sensor(kind, likelihood, noise, options)
+    return replace(model, sensors=sensors), {kind: dict(values) for kind in sensors}
+
+
+def likelihood_paths(model, renderer, objects, obs, moves):
+    """Per likelihood: a whole scene, a single-object move and a noise move on the fast
+    path, as (paths, scorers)."""
+    paths = {}
+    for name in LIKELIHOODS:
+        variant, noise = with_likelihood(model, name)
+        fast = Scorer(variant, obs, renderer)
+        assert fast.pixels is not None
+        state = Sampler(variant, fast, np.random.default_rng(1)).make_trace(objects, noise)
+        other = {k: {p: v * 1.01 for p, v in n.items()} for k, n in noise.items()}
+        paths[f"whole scene ({name})"] = (
+            lambda f=fast, n=noise: f.evaluate(anew(objects), noise=n), 1)
+        paths[f"move ({name})"] = (
+            lambda f=fast, s=state: [f.evaluate(anew(m), parent=s) for m in moves], MOVES)
+        paths[f"noise move ({name})"] = (lambda f=fast, s=state, o=other: f.rescore(s, o), 1)
+    return paths
+
+
 def memory_floor(obs) -> float:
     arrays = [a for f in obs.frames for a in (f.rgb, f.depth) if a is not None]
     return lambda: [a.sum() for a in arrays]
@@ -264,6 +310,21 @@ def main(argv=None) -> None:
           [[name, f"{v:,.0f}",
             "" if name.startswith("incremental") else times(r.ratio("incremental (fast)", name))]
            for name, v in r.items()])
+    # -- each likelihood on the fast path, same setting ---------------------------------------
+    lr = measure(likelihood_paths(model, renderer, objects, obs, moves), args.repeats,
+                 args.seconds)
+    rows = []
+    for what in ("whole scene", "move", "noise move"):
+        for name in LIKELIHOODS:
+            path = f"{what} ({name})"
+            # Time per evaluation relative to the Gaussian's: the Gaussian's rate over this.
+            vs = "" if name == "gaussian" or what == "noise move" else \
+                times(lr.ratio(f"{what} (gaussian)", path))
+            rows.append([what, name, f"{lr[path]:,.0f}", vs])
+    table(f"Each likelihood on the fast path, K={k}, {n_cam} cameras, {size}x{size}: "
+          "evaluations per second, and the time of one against the Gaussian's (median of the "
+          "repeats' ratios, and their range)", ["evaluation", "likelihood", "evals/s",
+                                                "time vs Gaussian"], rows)
     floor = r["memory floor"]
     print(f"\nMemory floor (reading the observations once): {floor:,.0f} per second; "
           f"the fast path is {floor / full['fast']:.1f}x from it on full scenes, "

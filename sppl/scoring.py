@@ -286,8 +286,9 @@ class Scorer(ReferenceScorer):
         self._terms = [(k, 2 * c + kind, float(self._constant[k][0]), self._constant[k][1])
                        for k, (c, kind) in self._slot.items() if k[1] not in self.per_pixel]
         self._pixel_terms = [((t.frame, t.kind), 2 * self._slot[(t.frame, t.kind)][0]
-                              + self._slot[(t.frame, t.kind)][1], t)
+                              + self._slot[(t.frame, t.kind)][1], t, self.per_pixel.index(t.kind))
                              for t in self.terms if t.kind in self.per_pixel]
+        self._fast_at: dict[tuple, bool] = {}  # _fast's answers, by noise key
         self._empty: dict[tuple, float] = {}  # (term key, noise key) -> the empty scene's
         defines = {}
         for kind, name in (("image", "IMAGE_TERM"), ("depth", "DEPTH_TERM")):
@@ -309,9 +310,10 @@ class Scorer(ReferenceScorer):
         if self.pixels is None:
             return super().evaluate(objects, parent, noise)
         noise = self._noise(parent, noise)
-        if not self._fast(noise):
+        key = self._key(noise)
+        if not self._fast(noise, key):
             return ReferenceScorer.evaluate(self, objects, noise=noise)
-        return (self._from_parent(objects, parent, noise)
+        return (self._from_parent(objects, parent, noise, key)
                 or self.evaluate_many([objects], [noise])[0])
 
     def evaluate_batch(self, requests):
@@ -321,8 +323,11 @@ class Scorer(ReferenceScorer):
         if self.pixels is None:
             return super().evaluate_batch(requests)
         noises = [self._noise(parent, None) for _, parent in requests]
-        out = [self._from_parent(objects, parent, noise) if self._fast(noise) else None
-               for (objects, parent), noise in zip(requests, noises)]
+        out = []
+        for (objects, parent), noise in zip(requests, noises):
+            key = self._key(noise)
+            out.append(self._from_parent(objects, parent, noise, key)
+                       if self._fast(noise, key) else None)
         full = [i for i, result in enumerate(out) if result is None]
         if full:
             results = self.evaluate_many([requests[i][0] for i in full], [noises[i] for i in full])
@@ -334,26 +339,25 @@ class Scorer(ReferenceScorer):
         """``ReferenceScorer.rescore`` on the GL side: the terms pass run again over the
         whole hypothesis at the new noise values (the Gaussian terms' statistics stand)."""
         if (self.pixels is None or all(trace.noise[k] == noise[k] for k in self.per_pixel)
-                or not self._fast(noise)):
+                or not self._fast(noise, self._key(noise))):
             return super().rescore(trace, noise)
         stats, renders = self.evaluate_many([trace.objects], [noise])[0]
         return {k: (v if k[1] in self.per_pixel else trace.stats[k]) for k, v in stats.items()}, \
             renders
 
-    def _from_parent(self, objects, parent, noise):
+    def _from_parent(self, objects, parent, noise, key):
         """``evaluate``'s answer scored incrementally from the parent trace, or None where
         there is no parent of this scorer's, its terms are at other noise values, or a full
         render is cheaper."""
         before = getattr(parent, "renders", None)
         if isinstance(before, Renders) and before.scorer is self and before.pixels is not None:
-            key = self._key(noise)
             if before.pixels.key != key:
                 return None
             if key is not None:
                 self._uniforms(noise, key)
             pixels = self._incremental(parent.objects, objects, before.pixels)
             if pixels is not None:
-                return self._stats(pixels.sums, noise), Renders(self, objects, pixels)
+                return self._stats(pixels.sums, noise, key), Renders(self, objects, pixels)
         return None
 
     def evaluate_many(self, hypotheses, noises=None):
@@ -377,7 +381,7 @@ class Scorer(ReferenceScorer):
             blocks, sums = self.pixels.render([self._drawn(objects) for objects in group])
             for b, objects in enumerate(group):
                 flat = sums[b].ravel().tolist()
-                out.append((self._stats(flat, noises[i]),
+                out.append((self._stats(flat, noises[i], key),
                             Renders(self, objects, _Pixels(flat, blocks[b], key=key))))
             i = j
         return out
@@ -387,13 +391,12 @@ class Scorer(ReferenceScorer):
     def _drawn(self, objects) -> list:
         return [*self._static, *(self.draws.of_object(o) for o in objects)]
 
-    def _stats(self, sums: list[float], noise=None) -> dict[tuple[int, str], np.ndarray]:
-        out = {key: np.array((n, max(empty + sums[i], 0.0)))
-               for key, i, n, empty in self._terms}
-        for key, i, t in self._pixel_terms:
-            values = noise[t.kind]
-            out[key] = np.array([*t.likelihood.key(values), self._empty_scene(key, t, values)
-                                 + sums[i]])
+    def _stats(self, sums: list[float], noise=None, key=None) -> dict[tuple[int, str], np.ndarray]:
+        out = {term: np.array((n, max(empty + sums[i], 0.0)))
+               for term, i, n, empty in self._terms}
+        for term, i, t, k in self._pixel_terms:
+            out[term] = np.array([*key[k], self._empty_scene(term, t, noise[t.kind], key[k])
+                                  + sums[i]])
         return out
 
     def _key(self, noise) -> tuple | None:
@@ -402,18 +405,25 @@ class Scorer(ReferenceScorer):
             return None
         return tuple(self.likelihoods[k].key(noise[k]) for k in self.per_pixel)
 
-    def _fast(self, noise) -> bool:
+    def _fast(self, noise, key) -> bool:
         """Whether the GL side can score the per-pixel likelihoods at these noise values:
         inside their support, with every uniform a finite float32 (a probability of exactly
         0 or 1, or a scale beyond float32, goes to the float64 reference)."""
-        for kind in self.per_pixel:
-            likelihood = self.likelihoods[kind]
-            values = likelihood.values(noise[kind])
-            if not likelihood.in_support(values):
-                return False
-            if not np.all(np.isfinite(np.float32(self._kind_uniforms(kind, values, 8.0)))):
-                return False
-        return True
+        if key is None:
+            return True
+        found = self._fast_at.get(key)
+        if found is None:
+            found = True
+            for kind in self.per_pixel:
+                likelihood = self.likelihoods[kind]
+                values = likelihood.values(noise[kind])
+                # depth_max only shifts a log that is finite for any camera's
+                found = found and likelihood.in_support(values) and bool(np.all(np.isfinite(
+                    np.float32(self._kind_uniforms(kind, values, 8.0)))))
+            if len(self._fast_at) > 256:
+                self._fast_at.clear()
+            self._fast_at[key] = found
+        return found
 
     def _kind_uniforms(self, kind, values, depth_max):
         likelihood = self.likelihoods[kind]
@@ -442,10 +452,9 @@ class Scorer(ReferenceScorer):
             self.pixels.set_noise(c, uniforms)
         self._noise_key = key
 
-    def _empty_scene(self, key, term: Term, values) -> float:
+    def _empty_scene(self, key, term: Term, values, noise_key) -> float:
         """The log density of a term's observation given the empty scene, at these noise
         values (numpy, float64; the GL-side terms are relative to it)."""
-        noise_key = term.likelihood.key(values)
         found = self._empty.get((key, noise_key))
         if found is None:
             if term.kind == "image":
