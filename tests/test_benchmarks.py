@@ -22,6 +22,8 @@ def test_evaluations_prints_both_tables(root, require_gl):
         assert f"| {path} |" in out
     # Panda3D is optional: either its rows are there or the script says why not.
     assert "| panda3d |" in out or "panda3d path skipped" in out
+    for row in ("| whole scene | mixture |", "| move | student_t |", "| noise move | mixture |"):
+        assert row in out
 
 
 @pytest.mark.slow
