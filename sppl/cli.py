@@ -254,7 +254,10 @@ def cmd_check(args) -> int:
             print(f"  {p.name:<10} {p.domain.describe():<24} ~ {p.prior}")
     for kind, s in model.sensors.items():
         noise = ", ".join(f"{p.name} ~ {p.prior}" for p in s.noise)
-        print(f"sensor {kind}: likelihood {s.likelihood}; {noise}")
+        options = ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}"
+                            for k, v in s.options.items())
+        options = f"({options})" if options else ""
+        print(f"sensor {kind}: likelihood {s.likelihood}{options}; {noise}")
     if model.no_overlap:
         print("constraint: no two footprints overlap")
     if model.max_objects is not None:
