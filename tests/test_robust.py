@@ -21,6 +21,7 @@ from sppl.chain import Sampler
 from sppl.errors import SpplError
 from sppl.lang import load_model
 from sppl.likelihoods import get_likelihood, gpu_statistics, register_likelihood
+from sppl.lockstep import sweep_together
 from sppl.observations import Observations, load_observations
 from sppl.render import Renderer
 from sppl.robust import Mixture, StudentT
@@ -275,6 +276,23 @@ def test_a_chain_on_the_fast_path_scores_every_state_as_the_reference(require_gl
         _agree(trace.stats, ref.statistics(trace.objects, trace.noise), ref, trace.noise)
         assert trace.log_likelihood == fast.log_likelihood(trace.stats, trace.noise)
     assert used["incremental"] > 0 and used["rescore"] > 0
+
+
+def test_chains_in_lockstep_each_score_at_their_own_noise(require_gl, root):
+    """Three chains sharing one fast scorer, their hypotheses drawn together at each chain's
+    noise values, draw what each draws alone with a scorer of its own."""
+    model, renderer, obs, _, _ = _setting(root, "mixture.scn")
+    shared = Scorer(model, obs, renderer)
+    together = [Sampler(model, shared, np.random.default_rng(s)) for s in range(3)]
+    alone = [Sampler(model, Scorer(model, obs, renderer), np.random.default_rng(s))
+             for s in range(3)]
+    a = [s.initial_trace() for s in together]
+    b = [s.initial_trace() for s in alone]
+    for _ in range(3):
+        a = sweep_together(together, a)
+        b = [s.sweep(t) for s, t in zip(alone, b)]
+        assert [t.as_dict() for t in a] == [t.as_dict() for t in b]
+        assert [t.score for t in a] == pytest.approx([t.score for t in b], rel=1e-12)
 
 
 def test_noise_values_the_gl_side_cannot_hold_go_to_the_reference(require_gl, root):
