@@ -21,6 +21,7 @@ from .model import Model
 from .observations import Observations, load_cameras, load_observations, write_observations
 from .posterior import load_run, open_posterior, write_posterior
 from .render import Renderer, raycast
+from .robust import Mixture, StudentT
 from .run import run_chain, run_chains
 from .scoring import ReferenceScorer, Scorer
 from .simulate import render_observations, sample_noise, sample_objects
@@ -29,6 +30,7 @@ from .verify import verify_model
 __all__ = [
     "Gaussian",
     "Likelihood",
+    "Mixture",
     "Model",
     "ModelError",
     "ObservationError",
@@ -40,6 +42,7 @@ __all__ = [
     "Sampler",
     "Scorer",
     "SpplError",
+    "StudentT",
     "available_likelihoods",
     "compare_scenes",
     "compile_model",

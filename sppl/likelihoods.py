@@ -28,7 +28,11 @@ _LOG_2PI = math.log(2.0 * math.pi)
 
 
 class Likelihood(Protocol):
-    """The interface every sensor likelihood implements."""
+    """The interface every sensor likelihood implements.
+
+    A likelihood whose statistics cannot serve every noise value (``sppl.robust``'s) sets
+    ``per_pixel = True``: its ``statistics`` then also takes the noise values to score at
+    and the frame's ``depth_max``, and ``sample`` takes ``depth_max``."""
 
     #: Names of the noise parameters the model file must give this likelihood a prior for.
     noise_parameters: tuple[str, ...]
