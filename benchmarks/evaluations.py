@@ -54,8 +54,8 @@ from sppl.camera import Camera, focal_from_fov, look_at  # noqa: E402
 from sppl.chain import Sampler  # noqa: E402
 from sppl.distributions import Beta, Gamma  # noqa: E402
 from sppl.domains import Interval, Positive  # noqa: E402
-from sppl.model import Parameter, Sensor  # noqa: E402
 from sppl.lang import load_model  # noqa: E402
+from sppl.model import Parameter, Sensor  # noqa: E402
 from sppl.observations import CameraSpec, Observations  # noqa: E402
 from sppl.render import Renderer, kernels, renderer_string  # noqa: E402
 from sppl.scoring import ReferenceScorer, Scorer  # noqa: E402

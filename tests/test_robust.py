@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy import stats
-from test_fast_scoring import SPECS
+from test_fast_scoring import _setting as fast_setting
 
 from sppl import cli, verify
 from sppl.chain import Sampler
@@ -22,11 +22,10 @@ from sppl.errors import SpplError
 from sppl.lang import load_model
 from sppl.likelihoods import get_likelihood, gpu_statistics, register_likelihood
 from sppl.lockstep import sweep_together
-from sppl.observations import Observations, load_observations
-from sppl.render import Renderer
+from sppl.observations import load_observations
 from sppl.robust import Mixture, StudentT
 from sppl.scoring import ReferenceScorer, Scorer
-from sppl.simulate import render_observations, sample_noise, sample_objects
+from sppl.simulate import sample_noise, sample_objects
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures" / "robust"
 # Absolute tolerance of the GL-side log density against the numpy twin, per term: float32
@@ -205,18 +204,9 @@ def test_missing_returns_are_sampled_by_what_the_render_shows():
 # -- the GL side against the numpy twin ------------------------------------------------------------
 
 
-def _setting(root, name, seed=0):
-    model = load_model(FIXTURES / name)
-    renderer = Renderer(model.render)
-    rng = np.random.default_rng(seed)
-    truth = sample_objects(model, rng)
-    noise = sample_noise(model, rng)
-    frames = render_observations(model, truth, noise, SPECS, renderer, rng)
-    for frame in frames:
-        if frame.depth is not None:  # a block of missing pixels as well as the sampled ones
-            frame.depth_valid[5:20, 10:30] = False
-            frame.depth[~frame.depth_valid] = np.nan
-    return model, renderer, Observations(root, frames), truth, noise
+def _setting(root, name):
+    """tests/test_fast_scoring.py's three cameras and missing depth, for a fixture model."""
+    return fast_setting(root, FIXTURES / name)
 
 
 def _agree(fast_stats, ref_stats, scorer, noise):
