@@ -332,6 +332,19 @@ def test_every_move_and_its_reverse_with_the_robust_likelihood_in_the_loop(requi
     assert any(r.quantity.startswith("noise") for r in report.rows)
 
 
+def _sbc(name, replicates):
+    return verify.sbc(load_model(FIXTURES / name), replicates=replicates, draws=7, thin=2,
+                      seed=8, p_jump=0.5)
+
+
+def test_sbc_ranks_are_uniform_with_the_mixture(require_gl):
+    """Ranks of the count, the balls' values and every noise parameter (the outlier shares
+    and missing-return probabilities too): chi-square against uniform, false alarm 1% for
+    the whole table (Holm)."""
+    report = _sbc("balls_mixture.scn", 60)
+    assert report.passed, report.table()
+
+
 class MisnormalisedMixture(Mixture):
     """A mixture whose outlier term is ten times a uniform density (so it integrates to
     more than one), with the right simulator: a wrong density the language cannot see."""
@@ -368,3 +381,9 @@ def test_sppl_verify_passes_with_each_robust_likelihood_long(require_gl, capsys,
                      "--geweke-chains", "300", "--geweke-length", "20", "--seed", "1"])
     out = capsys.readouterr().out
     assert code == 0, out
+
+
+@pytest.mark.slow
+def test_sbc_ranks_are_uniform_with_student_t(require_gl):
+    report = _sbc("balls_student_t.scn", 200)
+    assert report.passed, report.table()
