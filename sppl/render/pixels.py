@@ -2,7 +2,9 @@
 
 The fast path of ``sppl.scoring``. Each camera's observation is uploaded once as an RGBA float
 texture (RGB, and depth in alpha); a hypothesis is drawn with a fragment shader that writes
-each pixel's squared-residual terms instead of its colour (``shaders/terms.frag``), every part
+each pixel's squared-residual terms instead of its colour (``shaders/terms.frag``; for a robust
+likelihood its log densities, ``shaders/likelihood.glsl``, at noise values set by
+``set_noise``), every part
 of a primitive in one instanced draw. The read-back is two floats a pixel, inside the rectangle
 the drawn parts can reach only (every term outside it is 0), and the CPU only sums them, in
 float64, so that float32 on the GPU costs nothing in accuracy. Each camera has its own programs,
