@@ -80,8 +80,7 @@ def main(argv=None) -> int:
         for j, tile in enumerate(tiles):
             sheet.paste(tile, (j * w, i * h))
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    # 256 colours: the sensor noise would make a full-colour PNG ten times larger.
-    sheet.quantize(256).save(args.out, optimize=True)
+    sheet.save(args.out, optimize=True)
     print(f"wrote {args.out}")
     return 0
 
