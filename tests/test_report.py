@@ -284,13 +284,18 @@ def test_the_browser_check_sees_a_missing_image_and_a_script_error(tmp_path):
     Image = pytest.importorskip("PIL.Image")
     Image.new("RGB", (4, 4)).save(tmp_path / "here.png")
     page = tmp_path / "index.html"
+    # The remote image is on this machine's loopback: a page that asks for it would ask the
+    # network for it anywhere else.
     page.write_text("<!DOCTYPE html><html><body><img src='here.png'><img src='gone.png'>"
+                    "<img src='http://127.0.0.1:9/remote.png'>"
                     "<script>undefined_function();</script></body></html>")
     result = check_page(page, require_chromium())
-    assert result.images == 2
-    assert [u.rsplit("/", 1)[-1] for u in result.broken_images] == ["gone.png"]
+    assert result.images == 3
+    assert sorted(u.rsplit("/", 1)[-1] for u in result.broken_images) == ["gone.png",
+                                                                          "remote.png"]
     assert any("undefined_function" in e for e in result.exceptions), result
-    assert len(result.problems) >= 2
+    assert result.remote_requests == ["http://127.0.0.1:9/remote.png"]
+    assert len(result.problems) >= 3
 
 
 def test_ctrl_c_stops_every_chain_with_a_summary(model, obs, tmp_path):

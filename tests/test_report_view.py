@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_report_computations import CLASSES, ROOT, cube, sphere
 
 from sppl import report_view
 from sppl.lang import load_model
@@ -20,21 +21,10 @@ from sppl.posterior import Chain, RunFiles
 from sppl.report_view import _embed_json, timeline, view_data, view_html
 from sppl.simulate import objects_from_dict
 
-ROOT = Path(__file__).resolve().parent.parent
-CLASSES = ["cube", "cone", "sphere"]
-
 
 @pytest.fixture(scope="module")
 def model():
     return load_model(ROOT / "models" / "shapes.scn")
-
-
-def cube(x, y, s=1.0, a=0.0, c="red"):
-    return {"class": "cube", "params": {"x": x, "y": y, "a": a, "s": s, "c": c}}
-
-
-def sphere(x, y, r=0.25, c="blue"):
-    return {"class": "sphere", "params": {"x": x, "y": y, "r": r, "c": c}}
 
 
 def sample(step, score, *objects):
