@@ -27,6 +27,7 @@ FLAGS = [
     "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
     "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-quic",
     "--remote-debugging-pipe", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+    "--window-size=1280,1000",  # a viewport that holds the whole 3D view (the default: 493 px)
 ]
 LOCAL_SCHEMES = ("file:", "data:", "blob:", "about:")
 

@@ -183,7 +183,7 @@
 
   function home() {
     orbit.target.set(centre.x, centre.y, 0.2);
-    orbit.r = 1.3 * span;
+    orbit.r = 1.0 * span;
     orbit.az = -Math.PI / 2 - 0.5;  // from the -y side, a little to the left
     orbit.el = 0.6;
     view.fov = 45;
