@@ -180,8 +180,8 @@ def check_page(page: str | Path, chromium: str, *, timeout: float = 60.0,
 
             if wait_for is not None:
                 while not evaluate_js(f"Boolean({wait_for})"):
-                    if time.monotonic() > deadline:
-                        raise TimeoutError(f"the page never made {wait_for} true")
+                    if time.monotonic() + 1.0 > deadline:  # leave time to ask once more
+                        raise TimeoutError(f"this never came true on the page: {wait_for}")
                     time.sleep(0.1)
             result.values = [evaluate_js(e) for e in evaluate]
             if screenshot:

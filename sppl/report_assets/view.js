@@ -9,6 +9,14 @@
   const canvas = $("sppl-view-canvas");
   const BACKGROUND = 0xf4f4f4;
 
+  if (typeof THREE === "undefined") {  // three.min.js was not beside the page
+    canvas.hidden = true;
+    $("sppl-view-nowebgl").textContent = "three.min.js, which draws this view, did not load: " +
+      "keep it in the folder of this page.";
+    $("sppl-view-nowebgl").hidden = false;
+    throw new Error("three.min.js did not load: keep it in the folder of the report's page");
+  }
+
   let renderer;
   try {
     renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
