@@ -662,7 +662,7 @@ EXPLAIN = {
         "image says anything and the prior alone decides whether an object is there. Black "
         "edges: the true scene, when the observation folder has one. The slider replays a "
         "chain: each step is a sweep at which the chain found a scene better (a higher log "
-        "joint) than any before, from its empty start to its best. Drag to turn the view, "
+        "joint) than any before, from its start to its best. Drag to turn the view, "
         "shift-drag or right-drag to move it, scroll to zoom, double-click to go back; "
         "\"look through\" puts you where a camera is."
     ),
@@ -687,7 +687,8 @@ EXPLAIN = {
         "and less certain than the number of objects the images show."
     ),
     "traces": (
-        "A chain starts from an empty scene and climbs; the first sweeps (<b>burn-in</b>, "
+        "A chain starts from a scene that explains nothing (an empty one, or only the objects "
+        "a model says are always there) and climbs; the first sweeps (<b>burn-in</b>, "
         "before the dotted line) still remember that start and are left out of every summary. "
         "After it, a chain that has converged wanders over a steady band. Several chains "
         "started independently should wander over the same band: one on a band of its own is "
