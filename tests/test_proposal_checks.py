@@ -1,0 +1,251 @@
+"""The checks of the proposals that look at the observations (``sppl.proposal_checks``):
+they pass on the code, and fail on copies of it broken on purpose, each with the sampler left
+as it is and only the density the ratio uses made wrong:
+
+  (i)   the density replaced by the prior;
+  (ii)  the density's spread halved (a birth's kernel, a refit's spreads, a merge partner's
+        radius and pixel scale);
+  (iii) the thesis's literal birth ratio (ordered tuple: one more 1 / (N_c + 1) on a birth),
+        which is no density error at all, so only the chain against the exact posterior
+        (``joint_check``) can see it; it runs with the slow tests.
+
+False alarms. Each test runs at a fixed seed, so it is deterministic. A passing test's
+``Report`` decides its rows together by Holm's correction at ALPHA = 1e-3 (the chance over
+seeds that a right sampler fails it), small enough for the default suite's family-wise budget
+of 1% to absorb every such test. A test that expects a failure asserts a p-value far below
+that (below 1e-6), so it has no false alarm to speak of; it fails only if the check lost its
+power.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from toys import COLOURS
+
+from sppl import fit as fitting
+from sppl import merge
+from sppl import proposal_checks as pc
+from sppl.birth import BirthProposal
+from sppl.chain import Sampler
+from sppl.distributions import Categorical, Gamma, Normal, Uniform
+from sppl.domains import Finite, Interval, Positive, Real
+from sppl.geometry import Part, scaling, translation
+from sppl.model import InferenceSettings, Model, ObjectClass, Parameter, Sensor
+from sppl.trace import make_object
+from sppl.verify import Report
+
+# The false-alarm rate of each passing test (Holm over its rows): 1e-3.
+ALPHA = 1e-3
+# What a test that expects the check to fail requires of the smallest p-value.
+POWER = 1e-6
+
+
+def _ball(v):
+    r = v["r"]
+    colour = (0.9, 0.2, 0.2) if v["c"] == "red" else (0.2, 0.3, 0.9)
+    return (Part("sphere", translation(v["x"], v["y"], 0) @ scaling(r, r, r), colour),)
+
+
+def seen_balls() -> Model:
+    """Balls near the origin, big enough to leave unexplained pixels on 16x16 cameras, with
+    every data-driven jump switched on."""
+    ball = ObjectClass(
+        "ball", 1.5,
+        (Parameter("x", Real(), Normal(0.0, 0.6), 0.3), Parameter("y", Real(), Normal(0.0, 0.6), 0.3),
+         Parameter("r", Positive(), Gamma(4.0, 0.08), 0.08),
+         Parameter("c", Finite(COLOURS), Categorical(COLOURS, (0.4, 0.6)))),
+        _ball, position=("x", "y"),
+    )
+    sensors = {
+        "image": Sensor("image", "gaussian", (Parameter("sigma", Positive(), Gamma(2.0, 0.05), 0.02),)),
+        "depth": Sensor("depth", "gaussian", (Parameter("sigma", Positive(), Gamma(2.0, 0.1), 0.04),)),
+    }
+    weights = {"birth": 1.0, "death": 1.0, "replace": 1.0, "refit": 1.0, "merge": 1.0,
+               "split": 1.0}
+    return Model((ball,), sensors, InferenceSettings(p_jump=1.0, jump_weights=weights))
+
+
+@pytest.fixture(scope="module")
+def setting(require_gl):
+    from sppl.render import Renderer
+
+    model = seen_balls()
+    found = pc.observed_state(model, Renderer(model.render), size=16, seed=3)
+    assert found is not None
+    return found
+
+
+@pytest.fixture(scope="module")
+def wide(require_gl):
+    """The same on 48x48 cameras, where objects stand pixels apart, so that a merge's
+    partners are not all equally likely."""
+    from sppl.render import Renderer
+
+    model = seen_balls()
+    found = pc.observed_state(model, Renderer(model.render), size=48, seed=3)
+    assert found is not None
+    return found
+
+
+def _smallest_p(report: Report) -> float:
+    return min(r.p_value for r in report.rows if r.p_value is not None)
+
+
+def birth_report(setting, seed=0, draws=30, weights=3000) -> Report:
+    sampler, state, _ = setting
+    rng = np.random.default_rng(seed)
+    return Report(pc.birth_rows(sampler, state, sampler.model.classes[0], rng, draws, weights),
+                  ALPHA)
+
+
+def refit_report(setting, seed=0, draws=25, weights=3000) -> Report:
+    sampler, state, missing = setting
+    rng = np.random.default_rng(seed)
+    return Report(pc.refit_rows(sampler, state, sampler.model.classes[0], missing, rng, draws,
+                                weights), ALPHA)
+
+
+def partner_report(setting, seed=0, draws=600) -> Report:
+    sampler, state, _ = setting
+    rng = np.random.default_rng(seed)
+    crowded = pc.crowded_state(sampler, state.noise, rng, tries=15)
+    assert crowded is not None
+    return Report(pc.partner_rows(sampler, *crowded, rng, draws), ALPHA)
+
+
+# -- the ways to break each density, sampling left as it is -----------------------------------
+
+
+def birth_density_is_prior(monkeypatch):
+    monkeypatch.setattr(BirthProposal, "log_density",
+                        lambda self, cls, values, trace: cls.log_prior(values))
+
+
+def birth_spread_halved(monkeypatch):
+    right = BirthProposal.log_density
+
+    def halved(self, cls, values, trace):
+        spread = self.spread
+        self.spread = spread / 2
+        try:
+            return right(self, cls, values, trace)
+        finally:
+            self.spread = spread
+
+    monkeypatch.setattr(BirthProposal, "log_density", halved)
+
+
+def refit_density_is_prior(monkeypatch):
+    monkeypatch.setattr(fitting, "log_mixture",
+                        lambda sampler, state, cls, values, fitted: cls.log_prior(values))
+
+
+def refit_spreads_halved(monkeypatch):
+    right = fitting.log_density
+
+    def halved(cls, values, fitted):
+        spreads = fitting.SPREADS
+        fitting.SPREADS = tuple(c / 2 for c in spreads)
+        try:
+            return right(cls, values, fitted)
+        finally:
+            fitting.SPREADS = spreads
+
+    monkeypatch.setattr(fitting, "log_density", halved)
+
+
+def _partners_drawn_right(monkeypatch, wrong):
+    """Merges choose their partner with the right probabilities, while their ratio (and a
+    split's reverse) use ``wrong``."""
+    right_weights, right_merge = merge.partner_log_weights, merge.propose_merge
+
+    def propose_merge(sampler, trace, rng, i=None, j=None, state=None, target=None):
+        n = len(trace.objects)
+        if n >= 2 and j is None:
+            i = int(rng.integers(n)) if i is None else i
+            p = np.exp(right_weights(trace.objects, i, merge.screen_of(sampler)))
+            j = int(rng.choice(n, p=p))
+        return right_merge(sampler, trace, rng, i=i, j=j, state=state, target=target)
+
+    monkeypatch.setattr(merge, "partner_log_weights", wrong)
+    monkeypatch.setattr(merge, "propose_merge", propose_merge)
+
+
+def partner_density_is_uniform(monkeypatch):
+    def uniform(objects, i, screen=None):
+        logw = np.full(len(objects), -math.log(len(objects) - 1))
+        logw[i] = -math.inf
+        return logw
+
+    _partners_drawn_right(monkeypatch, uniform)
+
+
+def partner_scales_halved(monkeypatch):
+    right = merge.partner_log_weights
+
+    def halved(objects, i, screen=None):
+        radius, pixels = merge.RADIUS, merge.PIXELS
+        merge.RADIUS, merge.PIXELS = radius / 2, pixels / 2
+        try:
+            return right(objects, i, screen)
+        finally:
+            merge.RADIUS, merge.PIXELS = radius, pixels
+
+    _partners_drawn_right(monkeypatch, halved)
+
+
+# -- the checks pass on the code ---------------------------------------------------------------
+
+
+def test_the_state_leaves_pixels_unexplained(setting):
+    sampler, state, missing = setting
+    assert len(sampler.birth.points(state)) >= 2
+    assert sampler.birth.weight > 0
+
+
+def test_birth_sampler_matches_its_density(setting):
+    """False alarm 1e-3 (Holm over the class's coordinates and the identity)."""
+    report = birth_report(setting)
+    assert report.passed, report.table()
+    assert {"birth of ball: x given the rest", "birth of ball: c given the rest",
+            "birth of ball: E[r/q] over a region"} <= {r.quantity for r in report.rows}
+
+
+def test_refit_sampler_matches_its_density(setting):
+    """False alarm 1e-3 (Holm)."""
+    report = refit_report(setting)
+    assert report.passed, report.table()
+
+
+def test_merge_partners_match_their_probabilities(wide):
+    """False alarm 1e-3 (Holm)."""
+    report = partner_report(wide)
+    assert report.passed, report.table()
+
+
+# -- and fail on each broken density -----------------------------------------------------------
+
+
+@pytest.mark.parametrize("brk", [birth_density_is_prior, birth_spread_halved])
+def test_a_wrong_birth_density_is_caught(setting, monkeypatch, brk):
+    brk(monkeypatch)
+    report = birth_report(setting)
+    assert _smallest_p(report) < POWER, report.table()
+
+
+@pytest.mark.parametrize("brk", [refit_density_is_prior, refit_spreads_halved])
+def test_a_wrong_refit_density_is_caught(setting, monkeypatch, brk):
+    brk(monkeypatch)
+    report = refit_report(setting)
+    assert _smallest_p(report) < POWER, report.table()
+
+
+@pytest.mark.parametrize("brk", [partner_density_is_uniform, partner_scales_halved])
+def test_a_wrong_partner_density_is_caught(wide, monkeypatch, brk):
+    brk(monkeypatch)
+    report = partner_report(wide)
+    assert _smallest_p(report) < POWER, report.table()
