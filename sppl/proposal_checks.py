@@ -402,7 +402,7 @@ def crowded_state(sampler: Sampler, noise, rng: np.random.Generator, tries: int 
     return best
 
 
-def proposal_checks(model: Model, *, seed=0, size: int = 16, draws: int = 150,
+def check_proposals(model: Model, *, seed=0, size: int = 16, draws: int = 150,
                     weights: int = 3000, partner_draws: int = 1000, renderer=None,
                     sampler_factory=Sampler, alpha: float = ALPHA) -> Report:
     """The sampler-against-density rows and the importance identity of every data-dependent
@@ -456,19 +456,24 @@ def proposal_checks(model: Model, *, seed=0, size: int = 16, draws: int = 150,
 
 
 class GridPosterior:
-    """The exact posterior of a model with at most one object, given fixed observations, by
-    quadrature: every class's parameters on a grid (``cells`` midpoints across each interval
-    parameter, every value of a categorical one; one render per cell), refined once to
-    ``cells`` midpoints across the box of coarse cells within e^-REFINE of the best (the
-    mass left outside it is in ``outside``), and each sensor's noise scale integrated out per
-    cell on a grid of its prior's range (the trapezoid rule in the scale). Its error is the
-    grid's: the likelihood's change across a fine cell (the midpoint rule's, second order in
-    the cell's width)."""
+    """The exact posterior, given fixed observations, of a model with at most one or two
+    objects whose parameters are intervals or categorical, by quadrature.
+
+    Each class's parameters are put on a grid (``cells`` midpoints across each interval
+    parameter, every value of a categorical one), refined once to ``cells`` midpoints across
+    the box of coarse cells within e^-REFINE of the best single object (what mass a single
+    object leaves outside it is ``outside_log``). The hypotheses are the empty scene, one
+    object in any cell, and (where two objects are allowed) an unordered pair of cells, each
+    rendered once; a pair of the same cell counts half, as a set of two objects does under
+    the unit-rate Poisson process. Each sensor's noise scale is integrated out per
+    hypothesis on a grid over its prior's range (the trapezoid rule in the scale). The error
+    is the grid's: the likelihood's change across a cell, the midpoint rule's, second order in
+    the cell's width."""
 
     REFINE = 25.0
 
     def __init__(self, sampler: Sampler, cells: int, rng: np.random.Generator,
-                 noise_cells: int = 200) -> None:
+                 noise_cells: int = 100) -> None:
         model = sampler.model
         self.model, self.sampler, self.cells = model, sampler, cells
         self.noise_axes = {}
@@ -477,34 +482,44 @@ class GridPosterior:
             xs = [par.prior.sample(rng) for _ in range(RANGE_DRAWS)]
             self.noise_axes[kind] = (par.name, np.geomspace(min(xs) / 10, 10 * max(xs),
                                                             noise_cells))
-        self.axes: dict[ObjectClass, dict[str, Any]] = {}
-        self.half: dict[ObjectClass, dict[str, float]] = {}
-        # Hypotheses: (class or None, values, log weight, {kind: log integrand over scales})
-        self.hypotheses = [self._cell(None, {}, 0.0)]
-        self.outside_log = -math.inf  # log of the coarse mass left outside the refined box
+        self.half: dict[str, dict[str, float]] = {}  # class name -> a cell's half widths
+        self.outside_log = -math.inf
+        atoms = []  # (class, values, log volume of its cell)
         for cls in model.classes:
             bounds = {p.name: (p.domain.low, p.domain.high) for p in cls.parameters
                       if not isinstance(p.domain, Finite)}
-            coarse = self._cells(cls, bounds)
-            top = max(h[2] for h in coarse)
-            kept = [h for h in coarse if h[2] > top - self.REFINE]
+            coarse = self._atoms(cls, bounds)
+            weights = np.array([self._weight((a,))[0] for a in coarse])
+            top = np.max(weights)
             fine_bounds = {}
             for name, (lo, hi) in bounds.items():
                 step = (hi - lo) / cells
-                near = [h[1][name] for h in kept]
+                near = [a[1][name] for a, w in zip(coarse, weights) if w > top - self.REFINE]
                 fine_bounds[name] = (max(lo, min(near) - 1.5 * step),
                                      min(hi, max(near) + 1.5 * step))
-            logs = np.array([h[2] for h in coarse])
-            out = [h[2] for h in coarse if any(
-                not (fine_bounds[n][0] <= h[1][n] <= fine_bounds[n][1]) for n in bounds)]
+            out = [w for a, w in zip(coarse, weights) if any(
+                not (fine_bounds[n][0] <= a[1][n] <= fine_bounds[n][1]) for n in bounds)]
             if out:
                 self.outside_log = max(self.outside_log, float(
-                    np.logaddexp.reduce(out) - np.logaddexp.reduce(logs)))
-            self.hypotheses += self._cells(cls, fine_bounds)
-        logs = np.array([h[2] for h in self.hypotheses])
-        self.probs = np.exp(logs - np.logaddexp.reduce(logs))
+                    np.logaddexp.reduce(out) - np.logaddexp.reduce(weights)))
+            atoms += self._atoms(cls, fine_bounds)
+        self.atoms = atoms
+        sets = [()] + [(a,) for a in range(len(atoms))]
+        if (model.max_objects or 1) >= 2:
+            sets += [(a, b) for a in range(len(atoms)) for b in range(a, len(atoms))]
+        self.sets = sets
+        self.logs, self.curves = [], []
+        for k in sets:
+            w, curves = self._weight(tuple(atoms[a] for a in k))
+            self.logs.append(w - (math.log(2.0) if len(k) == 2 and k[0] == k[1] else 0.0))
+            self.curves.append(curves)
+        self.logs = np.array(self.logs)
+        self._normalise()
 
-    def _cells(self, cls: ObjectClass, bounds):
+    def _normalise(self) -> None:
+        self.probs = np.exp(self.logs - np.logaddexp.reduce(self.logs))
+
+    def _atoms(self, cls: ObjectClass, bounds):
         axes, half = {}, {}
         for p in cls.parameters:
             if isinstance(p.domain, Finite):
@@ -513,20 +528,24 @@ class GridPosterior:
                 lo, hi = bounds[p.name]
                 axes[p.name] = lo + (hi - lo) * (np.arange(self.cells) + 0.5) / self.cells
                 half[p.name] = 0.5 * (hi - lo) / self.cells
-        self.axes[cls], self.half[cls] = axes, half
+        self.half[cls.name] = half
         volume = sum(math.log(2 * h) for h in half.values())
-        return [self._cell(cls, dict(zip(axes, combo)), volume)
+        return [(cls, {n: (float(v) if not isinstance(v, str) else v)
+                       for n, v in zip(axes, combo)}, volume)
                 for combo in _product(list(axes.values()))]
 
-    def _cell(self, cls, values, log_volume):
+    def _weight(self, atoms):
+        """log of the posterior mass of these objects' cells (unnormalised), and each
+        sensor's log integrand over its grid of noise scales."""
         from .trace import objects_log_prior
 
         model, scorer = self.model, self.sampler.scorer
-        objects = () if cls is None else (make_object(model, cls, values),)
-        if objects and not math.isfinite(objects[0].log_prior):
-            return (cls, values, -math.inf, {k: None for k in self.noise_axes})
+        objects = tuple(make_object(model, cls, values) for cls, values, _ in atoms)
+        if any(not math.isfinite(o.log_prior) for o in objects):
+            return -math.inf, None
         stats_, _ = scorer.evaluate(objects)
-        curves, total = {}, objects_log_prior(model, objects) + log_volume
+        curves = {}
+        total = objects_log_prior(model, objects) + sum(v for _, _, v in atoms)
         for kind, (name, sigmas) in self.noise_axes.items():
             curve = np.array([
                 noise_log_prior_of(model, kind, name, s)
@@ -535,76 +554,89 @@ class GridPosterior:
                 for s in sigmas])
             curves[kind] = curve
             total += _log_trapezoid(curve, sigmas)
-        return (cls, values, total, curves)
+        return total, curves
 
-    def log_odds(self) -> float:
-        """log P(an object) - log P(none)."""
-        logs = np.log(self.probs[1:][self.probs[1:] > 0])
-        return float(np.logaddexp.reduce(logs) - math.log(self.probs[0]))
-
-    def scale_rates(self, factor: float, model: Model, sampler: Sampler) -> None:
-        """The posterior of ``model``, the same but for every class's rate multiplied by
-        ``factor``, whose chains ``sampler`` runs: an object's cells gain log ``factor``
-        (the total rate's exp(-sum) is the same in every cell and cancels)."""
-        self.model, self.sampler = model, sampler
-        logs = np.log(np.maximum(self.probs, 1e-300))
-        logs[1:] += math.log(factor)
-        self.probs = np.exp(logs - np.logaddexp.reduce(logs))
-        by_name = {c.name: c for c in model.classes}
-        self.hypotheses = [(None if c is None else by_name[c.name], v, w, k)
-                           for c, v, w, k in self.hypotheses]
-        self.axes = {by_name[c.name]: a for c, a in self.axes.items()}
-        self.half = {by_name[c.name]: a for c, a in self.half.items()}
-
-    def p_class(self) -> dict[str | None, float]:
-        out: dict[str | None, float] = {}
-        for (cls, *_), p in zip(self.hypotheses, self.probs):
-            key = None if cls is None else cls.name
+    def p_count(self) -> dict[tuple[str, ...], float]:
+        """Posterior probability of each multiset of classes (sorted names; () for none)."""
+        out: dict[tuple[str, ...], float] = {}
+        for k, p in zip(self.sets, self.probs):
+            key = tuple(sorted(self.atoms[a][0].name for a in k))
             out[key] = out.get(key, 0.0) + float(p)
         return out
 
+    def scale_rates(self, p_empty: float, model: Model, sampler: Sampler) -> float:
+        """Scale every class's rate by the one factor f that makes the empty scene's
+        posterior probability ``p_empty``, for ``model`` (the same with those rates), whose
+        chains ``sampler`` runs: a hypothesis of n objects gains n log f (the total rate's
+        exp(-sum) is the same in every one and cancels). Returns f."""
+        n = np.array([len(k) for k in self.sets])
+        mass = [float(np.sum(self.probs[n == j])) for j in range(3)]
+        # p_empty (m0 + m1 f + m2 f^2) = m0
+        a, b, c = p_empty * mass[2], p_empty * mass[1], (p_empty - 1.0) * mass[0]
+        f = -c / b if a == 0.0 else (-b + math.sqrt(b * b - 4 * a * c)) / (2 * a)
+        self.logs = self.logs + n * math.log(f)
+        self._normalise()
+        by_name = {c.name: c for c in model.classes}
+        self.atoms = [(by_name[c.name], v, w) for c, v, w in self.atoms]
+        self.model, self.sampler = model, sampler
+        return f
+
     def draw(self, rng: np.random.Generator):
-        """A draw of (objects, noise): a cell by its probability, the values uniform within
-        it, each noise scale from its conditional on the cell's grid of scales."""
+        """A draw of (objects, noise): a hypothesis by its probability, each object's values
+        uniform within its cell, each noise scale from its conditional on the hypothesis's
+        grid of scales."""
         k = int(rng.choice(len(self.probs), p=self.probs))
-        cls, values, _, curves = self.hypotheses[k]
-        objects = ()
-        if cls is not None:
+        objects = []
+        for a in self.sets[k]:
+            cls, values, _ = self.atoms[a]
             values = dict(values)
-            for name, half in self.half[cls].items():
+            for name, half in self.half[cls.name].items():
                 values[name] = float(values[name] + rng.uniform(-half, half))
-            objects = (make_object(self.model, cls, values),)
+            objects.append(make_object(self.model, cls, values))
+        objects = [objects[i] for i in rng.permutation(len(objects))]
         noise = {}
         for kind, (name, sigmas) in self.noise_axes.items():
-            w = np.exp(curves[kind] - curves[kind].max()) * np.gradient(sigmas)
+            curve = self.curves[k][kind]
+            w = np.exp(curve - curve.max()) * np.gradient(sigmas)
             i = int(rng.choice(len(sigmas), p=w / w.sum()))
             noise[kind] = {name: float(sigmas[i])}
-        return objects, noise
+        return tuple(objects), noise
+
+    def _one_object(self, cls: ObjectClass):
+        """(cell values, probability) of a uniformly chosen object of the scene, given that
+        it is of class ``cls``."""
+        out = []
+        for k, p in zip(self.sets, self.probs):
+            for a in k:
+                if self.atoms[a][0].name == cls.name and p > 0:
+                    out.append((self.atoms[a][1], p / len(k)))
+        total = sum(p for _, p in out)
+        return [(v, p / total) for v, p in out]
 
     def marginal_cdf(self, cls: ObjectClass, name: str) -> Callable[[np.ndarray], np.ndarray]:
-        """The cdf of parameter ``name`` of the object given that it is of class ``cls``:
+        """The cdf of parameter ``name`` of a uniformly chosen object of class ``cls``:
         piecewise linear across the cells (uniform within each, as ``draw`` draws)."""
-        centres, half = self.axes[cls][name], self.half[cls][name]
-        mass = np.zeros(len(centres))
-        for (c, values, _, _), p in zip(self.hypotheses, self.probs):
-            if c is cls:
-                mass[np.searchsorted(centres, values[name])] += p
-        edges = np.concatenate([[centres[0] - half], centres + half])
-        cum = np.concatenate([[0.0], np.cumsum(mass)]) / mass.sum()
+        half = self.half[cls.name][name]
+        mass: dict[float, float] = {}
+        for values, p in self._one_object(cls):
+            mass[values[name]] = mass.get(values[name], 0.0) + p
+        centres = np.array(sorted(mass))
+        m = np.array([mass[c] for c in centres])
+        edges = np.stack([centres - half, centres + half], axis=1).ravel()
+        cum = np.stack([np.concatenate([[0.0], np.cumsum(m)[:-1]]), np.cumsum(m)],
+                       axis=1).ravel()
         return lambda x: np.interp(x, edges, cum)
 
     def categorical(self, cls: ObjectClass, name: str) -> dict[Any, float]:
-        out = dict.fromkeys(self.axes[cls][name], 0.0)
-        for (c, values, _, _), p in zip(self.hypotheses, self.probs):
-            if c is cls:
-                out[values[name]] += p
-        total = sum(out.values())
-        return {k: v / total for k, v in out.items()}
+        out: dict[Any, float] = {}
+        for values, p in self._one_object(cls):
+            out[values[name]] = out.get(values[name], 0.0) + p
+        return out
 
     def noise_cdf(self, kind: str) -> Callable[[np.ndarray], np.ndarray]:
         name, sigmas = self.noise_axes[kind]
         dens = np.zeros(len(sigmas))
-        for (_, _, _, curves), p in zip(self.hypotheses, self.probs):
+        for curves, p in zip(self.curves, self.probs):
             if p == 0.0:
                 continue
             c = curves[kind]
@@ -633,8 +665,8 @@ def _product(axes):
 
 def joint_ready(model: Model) -> str | None:
     """Why ``joint_check`` cannot compute the exact posterior of ``model``, or None."""
-    if model.max_objects != 1:
-        return "it needs a model of at most one object (max_objects = 1)"
+    if model.max_objects not in (1, 2):
+        return "it needs a model of at most one or two objects (max_objects = 1 or 2)"
     if any(c.count is not None for c in model.classes):
         return "it needs Poisson counts, not fixed ones"
     for c in model.classes:
@@ -648,24 +680,24 @@ def joint_ready(model: Model) -> str | None:
 
 
 def joint_check(model: Model, truth, truth_noise, *, chains: int = 200, length: int = 8,
-                cells: int = 41, size: int = 16, seed=0, p_object: float | None = 0.1, renderer=None,
-                sampler_factory=Sampler, alpha: float = ALPHA) -> Report:
+                cells: int = 31, size: int = 16, seed=0, p_empty: float | None = None,
+                renderer=None, sampler_factory=Sampler, alpha: float = ALPHA) -> Report:
     """Many short chains, with every move of the model's sampler (data-driven births,
-    refits, replaces) on fixed observations simulated from ``truth`` (objects) and
-    ``truth_noise`` on the ``size`` pixel verify cameras, each started from an exact draw of
-    the posterior (``GridPosterior``) and run ``length`` sweeps; their final states, which
-    are independent posterior draws if every move leaves the posterior invariant, against
-    the exact posterior: which class (or none) by chi-square, each parameter of the object
-    by KS (chi-square for a categorical one), each noise scale by KS.
+    refits, replaces, merges and splits where two objects are allowed) on fixed observations
+    simulated from ``truth`` (objects) and ``truth_noise`` on the ``size`` pixel verify
+    cameras, each started from an exact draw of the posterior (``GridPosterior``) and run
+    ``length`` sweeps. If every move leaves the posterior invariant, their final states are
+    independent posterior draws; they are compared with the exact posterior: the classes of
+    the objects (the count, with one class) by chi-square, a parameter of one object of the
+    scene chosen uniformly by KS (chi-square for a categorical one), each noise scale by KS.
 
-    With ``p_object``, every class's rate is scaled by the one factor that gives an object
-    that posterior probability. Where the object is seen, its posterior is far narrower
-    than a birth's spread, and a death is accepted only when the odds of an object are low,
-    about the ratio of the birth density to the posterior's where the object is; births and
-    deaths must be accepted for their ratios to show. (Any rates give a valid model; the moves
-    do not depend on them.)"""
+    With ``p_empty``, every class's rate is scaled by the one factor that gives the empty
+    scene that posterior probability (any rates make a valid model, and no move depends on
+    them): births and deaths must be accepted for their ratios to show, and they are where
+    no count is certain. The false-alarm rate is ``alpha`` (Holm over the rows), up to the
+    grid's error."""
     from .errors import SpplError
-    from .verify import _finished_warmup, chisquare_gof
+    from .verify import _count_data_births, _finished_warmup, chisquare_gof
 
     why = joint_ready(model)
     if why is not None:
@@ -676,24 +708,23 @@ def joint_check(model: Model, truth, truth_noise, *, chains: int = 200, length: 
         renderer = Renderer(model.render)
     obs_seq, grid_seq, chain_seq, warm_seq = _seq(seed).spawn(4)
     sim = _Simulator(model, verify_cameras(model, size), renderer)
-    obs_rng = np.random.default_rng(obs_seq)
-    observations = sim.observe(sim.render(truth), truth_noise, obs_rng)
+    observations = sim.observe(sim.render(truth), truth_noise, np.random.default_rng(obs_seq))
     rng = np.random.default_rng(chain_seq)
-    sampler = sim.sampler(observations, rng, sampler_factory,
-                          warmup=_finished_warmup(model, np.random.default_rng(warm_seq)))
+    warmup = _finished_warmup(model, np.random.default_rng(warm_seq))
+    sampler = sim.sampler(observations, rng, sampler_factory, warmup=warmup)
     exact = GridPosterior(sampler, cells, np.random.default_rng(grid_seq))
-    if p_object is not None:
-        factor = math.exp(math.log(p_object / (1.0 - p_object)) - exact.log_odds())
+    scaled = ""
+    if p_empty is not None:
+        factor = exact.scale_rates(p_empty, model, sampler)
         model = replace(model, classes=tuple(replace(c, rate=c.rate * factor)
                                              for c in model.classes))
         sim.model = model
-        sampler = sim.sampler(observations, rng, sampler_factory, warmup=sampler.warmup)
-        exact.scale_rates(factor, model, sampler)
-    finals = []
+        sampler = sim.sampler(observations, rng, sampler_factory, warmup=warmup)
+        exact.scale_rates(p_empty, model, sampler)  # factor 1 now: the classes swapped in
+        scaled = f" (rates scaled by {factor:.3g})"
     data_births = [0, 0]
-    from .verify import _count_data_births
-
     _count_data_births(sampler, data_births)
+    finals = []
     for _ in range(chains):
         objects, noise = exact.draw(rng)
         trace = sampler.make_trace(objects, noise)
@@ -702,17 +733,18 @@ def joint_check(model: Model, truth, truth_noise, *, chains: int = 200, length: 
         finals.append(trace)
 
     rows = []
-    p_class = exact.p_class()
-    keys = [None, *(c.name for c in model.classes)]
-    observed = [sum((t.objects[0].cls.name if t.objects else None) == k for t in finals)
-                for k in keys]
-    chi2, p = chisquare_gof(observed, [p_class.get(k, 0.0) for k in keys])
-    shares = lambda xs: ", ".join(f"{k or 'none'} {x:.3f}" for k, x in zip(keys, xs))  # noqa: E731
-    rows.append(Row("joint", "which object (or none)", shares([p_class.get(k, 0.0)
-                                                               for k in keys]),
+    p_count = exact.p_count()
+    keys = sorted(p_count)
+    seen = [tuple(sorted(o.cls.name for o in t.objects)) for t in finals]
+    observed = [sum(s == k for s in seen) for k in keys]
+    p = chisquare_gof(observed, [p_count[k] for k in keys])[1]
+    shares = lambda xs: ", ".join(f"{'+'.join(k) or 'none'} {x:.3f}"  # noqa: E731
+                                  for k, x in zip(keys, xs))
+    rows.append(Row("joint", "objects in the scene", shares([p_count[k] for k in keys]),
                     shares([o / len(finals) for o in observed]) + f" (n={len(finals)})", p))
     for cls in model.classes:
-        objs = [t.objects[0] for t in finals if t.objects and t.objects[0].cls is cls]
+        picked = [t.objects[int(rng.integers(len(t.objects)))] for t in finals if t.objects]
+        objs = [o for o in picked if o.cls.name == cls.name]
         if len(objs) < 20:
             continue
         for par in cls.parameters:
@@ -720,25 +752,22 @@ def joint_check(model: Model, truth, truth_noise, *, chains: int = 200, length: 
                 probs = exact.categorical(cls, par.name)
                 counts = [sum(o.values[par.name] == v for o in objs) for v in probs]
                 p = chisquare_gof(counts, list(probs.values()))[1]
-                rows.append(Row("joint", f"{cls.name}.{par.name}", "exact posterior",
-                                f"n={len(objs)}", p))
+                rows.append(Row("joint", f"{cls.name}.{par.name} of an object",
+                                "exact posterior (chi-square)", f"n={len(objs)}", p))
                 continue
-            cdf = exact.marginal_cdf(cls, par.name)
             xs = np.array([o.values[par.name] for o in objs])
-            ks = stats.kstest(xs, cdf)
-            rows.append(Row("joint", f"{cls.name}.{par.name}", "exact posterior (KS)",
-                            f"n={len(objs)}, D={ks.statistic:.3f}", float(ks.pvalue)))
+            ks = stats.kstest(xs, exact.marginal_cdf(cls, par.name))
+            rows.append(Row("joint", f"{cls.name}.{par.name} of an object",
+                            "exact posterior (KS)", f"n={len(objs)}, D={ks.statistic:.3f}",
+                            float(ks.pvalue)))
     for kind, (name, _) in exact.noise_axes.items():
         ks = stats.kstest(np.array([t.noise[kind][name] for t in finals]), exact.noise_cdf(kind))
         rows.append(Row("joint", f"{kind}.{name}", "exact posterior (KS)",
                         f"n={len(finals)}, D={ks.statistic:.3f}", float(ks.pvalue)))
     by_move = sampler.stats.by_move()
-    notes = [f"joint: {chains} chains of {length} sweeps from exact posterior draws, "
-             f"log P(object)/P(none) {exact.log_odds():.2f}"
-             + (f" (rates scaled by {factor:.3g})" if p_object is not None else "") + ", "
-             f"grid mass left out {math.exp(exact.outside_log):.1e}, "
-             f"{cells} cells a parameter on {size}x{size} verify cameras; "
-             f"{data_births[1]} of {data_births[0]} birth proposals could use unexplained "
-             f"pixels; accepted/proposed: "
+    notes = [f"joint: {chains} chains of {length} sweeps from exact posterior draws{scaled}; "
+             f"{len(exact.atoms)} cells, grid mass left out {math.exp(exact.outside_log):.1e}; "
+             f"{size}x{size} verify cameras; {data_births[1]} of {data_births[0]} birth "
+             "proposals could use unexplained pixels; accepted/proposed: "
              + ", ".join(f"{m} {a}/{n}" for m, (n, a) in sorted(by_move.items()))]
     return Report(rows, alpha, notes)
