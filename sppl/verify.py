@@ -1115,8 +1115,8 @@ def verify_model(
 
         checks.append((
             "proposals", "data-dependent proposals",
-            f"proposals: the data-dependent proposals' samplers against their densities, "
-            f"{proposal_draws} draws each ...",
+            (f"proposals: the data-dependent proposals' samplers against their densities, "
+             f"{proposal_draws} draws each ..."),
             lambda: check_proposals(model, seed=proposals_seq, draws=proposal_draws,
                                     renderer=renderer, sampler_factory=sampler_factory),
         ))
