@@ -25,10 +25,10 @@ directly, with the very functions the moves call to draw from it and to score it
   and of the noise scales. Many short chains start from exact posterior draws, so their final
   states are independent posterior draws if every move is right: the count by chi-square,
   a parameter of one object by KS against the grid's marginal, the noise scales by KS. In
-  principle it sees a consistent ratio for the wrong target, which the first two cannot; in
-  practice its power is where births and deaths are often accepted, which a sharp likelihood
-  prevents, and the thesis's literal ratio differs from the right one only with two objects
-  of a class, whose grid costs cells^4 renders (see docs/inference.md for what it caught).
+  principle it sees a consistent ratio for the wrong target, which the first two cannot (the
+  thesis's literal birth ratio, on two objects); in practice its power is where births and
+  deaths are often accepted, which a sharp likelihood prevents (docs/inference.md says what
+  it caught).
 
 Every statistical row carries its p-value, and a ``Report`` decides them together with Holm's
 correction at its ``alpha`` (the family-wise false-alarm rate of the whole report).
@@ -462,7 +462,8 @@ class GridPosterior:
     objects whose parameters are intervals or categorical, by quadrature.
 
     Each class's parameters are put on a grid (``cells`` midpoints across each interval
-    parameter, every value of a categorical one), refined once to ``cells`` midpoints across
+    parameter, or ``cells[name]`` across parameter ``name``: one where the likelihood does
+    not depend on it; every value of a categorical one), refined once to ``cells`` midpoints across
     the box of coarse cells within e^-REFINE of the best single object (what mass a single
     object leaves outside it is ``outside_log``). The hypotheses are the empty scene, one
     object in any cell, and (where two objects are allowed) an unordered pair of cells, each
@@ -474,7 +475,8 @@ class GridPosterior:
 
     REFINE = 25.0
 
-    def __init__(self, sampler: Sampler, cells: int, rng: np.random.Generator,
+    def __init__(self, sampler: Sampler, cells: int | Mapping[str, int],
+                 rng: np.random.Generator,
                  noise_cells: int = 400) -> None:
         model = sampler.model
         self.model, self.sampler, self.cells = model, sampler, cells
@@ -497,7 +499,7 @@ class GridPosterior:
             top = np.max(weights)
             fine_bounds = {}
             for name, (lo, hi) in bounds.items():
-                step = (hi - lo) / cells
+                step = (hi - lo) / (cells if isinstance(cells, int) else cells[name])
                 near = [a[1][name] for a, w in zip(coarse, weights) if w > top - self.REFINE]
                 fine_bounds[name] = (max(lo, min(near) - 1.5 * step),
                                      min(hi, max(near) + 1.5 * step))
@@ -530,8 +532,9 @@ class GridPosterior:
                 axes[p.name] = tuple(p.domain.values)
             else:
                 lo, hi = bounds[p.name]
-                axes[p.name] = lo + (hi - lo) * (np.arange(self.cells) + 0.5) / self.cells
-                half[p.name] = 0.5 * (hi - lo) / self.cells
+                n = self.cells if isinstance(self.cells, int) else self.cells[p.name]
+                axes[p.name] = lo + (hi - lo) * (np.arange(n) + 0.5) / n
+                half[p.name] = 0.5 * (hi - lo) / n
         self.half[cls.name] = half
         volume = sum(math.log(2 * h) for h in half.values())
         return [(cls, {n: (float(v) if not isinstance(v, str) else v)
@@ -685,7 +688,8 @@ def joint_ready(model: Model) -> str | None:
 
 
 def joint_check(model: Model, truth, truth_noise, *, chains: int = 200, length: int = 8,
-                cells: int = 31, size: int = 16, seed=0, p_empty: float | None = None,
+                cells: int | Mapping[str, int] = 31, size: int = 16, seed=0,
+                p_empty: float | None = None,
                 renderer=None, sampler_factory=Sampler, alpha: float = ALPHA) -> Report:
     """Many short chains, with every move of the model's sampler (data-driven births,
     refits, replaces, merges and splits where two objects are allowed) on fixed observations
