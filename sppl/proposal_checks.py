@@ -14,15 +14,15 @@ directly, with the very functions the moves call to draw from it and to score it
   over a categorical one, randomised within the atom). If the density is the sampler's, every
   u is uniform (Rosenblatt); Kolmogorov-Smirnov tests it. For a merge partner (a discrete
   choice), chi-square of the chosen partners against the probabilities the ratio uses.
-- ``importance identity``: for a reference density r that is 1 on a region B (uniform over a
-  box around what the proposal aims at, times the prior of the coordinates the proposal draws
-  from the prior), E_{v ~ sampler}[r(v) / q(v)] = 1 whenever q > 0 on B. A density that is not
-  the sampler's (the prior in its place, a wrong spread) moves the mean; a z-test on the mean
-  of these bounded weights decides.
+- ``importance identity``: for a normalised reference density r that is zero outside a
+  bounded region B (a normal truncated to B, around what the proposal aims at, times the
+  prior of the coordinates the proposal draws from the prior), E_{v ~ sampler}[r(v) / q(v)]
+  = 1 whenever q > 0 on B. A density that is not the sampler's (the prior in its place, a
+  wrong spread) moves the mean; a z-test on the mean of these bounded weights decides.
 - ``joint_check``: a chain with every data-driven move switched on, on fixed tiny images,
-  against the exact posterior of a model with at most one object whose parameters are all
-  bounded, computed by quadrature over a grid of the object's parameters (one render per cell)
-  and of the noise scales. Many short chains start from exact posterior draws, so their final
+  against the exact posterior of a model with at most one or two objects whose parameters
+  are all bounded, computed by quadrature over a grid of the objects' parameters (one render
+  per cell, or pair of cells) and of the noise scales. Many short chains start from exact posterior draws, so their final
   states are independent posterior draws if every move is right: the count by chi-square,
   a parameter of one object by KS against the grid's marginal, the noise scales by KS. In
   principle it sees a consistent ratio for the wrong target, which the first two cannot (the
@@ -207,9 +207,9 @@ def _discrete_options(cls: ObjectClass, name: str, rng: np.random.Generator) -> 
 def birth_rows(sampler: Sampler, state: Trace, cls: ObjectClass, rng: np.random.Generator,
                draws: int, weights: int) -> list[Row]:
     """``sampler.birth.sample`` against ``sampler.birth.log_density`` for a ``cls`` object
-    born into ``state``: conditional transforms of every coordinate, and E[r/q] = 1 with r
-    uniform on a square of side two spreads around an unexplained point (times the prior of
-    the other coordinates, which a birth draws from the prior)."""
+    born into ``state``: conditional transforms of every coordinate, and E[r/q] = 1 with r a
+    normal of the birth's spread around an unexplained point, truncated to two spreads
+    (times the prior of the other coordinates, which a birth draws from the prior)."""
     birth = sampler.birth
     points = birth.points(state)
     label = f"birth of {cls.name}"
@@ -248,9 +248,9 @@ def refit_rows(sampler: Sampler, state: Trace, cls: ObjectClass, like: SceneObje
                rng: np.random.Generator, draws: int, weights: int) -> list[Row]:
     """``fit.sample`` against ``fit.log_mixture`` for a ``cls`` object fitted into ``state``
     from ``like`` (the fit ``fit.fit`` makes, once): conditional transforms of every
-    coordinate, and E[r/q] = 1 with r uniform on a box of half a random-walk step around the
-    fit in the continuous coordinates, uniform over a categorical one's values, and the prior
-    of an integer one."""
+    coordinate, and E[r/q] = 1 with r a normal of the refit's widest spread around the fit in
+    the continuous coordinates, truncated to two of it, uniform over a categorical one's
+    values, and the prior of an integer one."""
     fitted = fitting.fit(sampler, state, cls, like)
     label = f"refit as {cls.name}"
     log_q = lambda v: fitting.log_mixture(sampler, state, cls, v, fitted)
