@@ -116,9 +116,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="width and height in pixels of the Geweke test's images (default: 8)")
     v.add_argument("--alpha", type=float, default=0.01,
                    help="family-wise false-alarm rate of the whole table (default: 0.01)")
-    v.add_argument("--proposal-draws", type=int, default=60,
+    v.add_argument("--proposal-draws", type=int, default=30,
                    help="draws per check of a proposal that looks at the observations "
-                   "(sampler against density; 0: leave those checks out; default: 60)")
+                   "(sampler against density; 0: leave those checks out; default: 30)")
 
     e = sub.add_parser(
         "export",

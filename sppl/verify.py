@@ -1078,7 +1078,7 @@ def verify_model(
     renderer=None,
     sampler_factory: Callable[..., Sampler] = Sampler,
     progress: Callable[[str], None] | None = None,
-    proposal_draws: int = 60,
+    proposal_draws: int = 30,
 ) -> Report:
     """The check of the declarations, prior recovery, the move checks and (when the model has
     sensors) a short Geweke test and the checks of the proposals that look at the
