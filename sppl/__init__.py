@@ -14,8 +14,10 @@ __version__ = "0.1.0"
 
 from .chain import Sampler
 from .compare import compare_scenes
+from .dataset import find_scenes, run_dataset
 from .errors import ModelError, ObservationError, RenderError, RunError, SpplError
 from .lang import compile_model, load_model, parse
+from .executors import LocalExecutor, RayExecutor
 from .likelihoods import Gaussian, Likelihood, available_likelihoods, register_likelihood
 from .model import Model
 from .observations import Observations, load_cameras, load_observations, write_observations
@@ -30,10 +32,12 @@ from .verify import verify_model
 __all__ = [
     "Gaussian",
     "Likelihood",
+    "LocalExecutor",
     "Model",
     "ModelError",
     "ObservationError",
     "Observations",
+    "RayExecutor",
     "ReferenceScorer",
     "RenderError",
     "Renderer",
@@ -45,6 +49,7 @@ __all__ = [
     "check_proposals",
     "compare_scenes",
     "compile_model",
+    "find_scenes",
     "joint_check",
     "load_cameras",
     "load_model",
@@ -57,6 +62,7 @@ __all__ = [
     "render_observations",
     "run_chain",
     "run_chains",
+    "run_dataset",
     "sample_noise",
     "sample_objects",
     "verify_model",
