@@ -262,8 +262,27 @@ def test_a_wrong_partner_density_is_caught(wide, monkeypatch, brk):
 # -- slow: the chain against the exact posterior -----------------------------------------------
 
 
-def _tile(v):
-    return (Part("box", translation(v["x"], v["y"], 0) @ scaling(1.6, 1.6, 0.05), (0.9, 0.2, 0.2)),)
+def flat_world(name: str, size: tuple[float, float], y_half: float, sigma: float,
+               weights, max_objects: int) -> Model:
+    """Flat red boxes of ``size`` (x, y) lying on the ground, placed uniformly in
+    [-1.5, 1.5] x [-y_half, y_half], seen by an RGB sensor whose noise scale has prior mean
+    ``sigma``; every data-driven move among ``weights``."""
+
+    def parts(v):
+        m = translation(v["x"], v["y"], 0) @ scaling(size[0], size[1], 0.05)
+        return (Part("box", m, (0.9, 0.2, 0.2)),)
+
+    cls = ObjectClass(
+        name, 1.0,
+        (Parameter("x", Interval(-1.5, 1.5), Uniform(-1.5, 1.5), 0.3),
+         Parameter("y", Interval(-y_half, y_half), Uniform(-y_half, y_half), 0.3)),
+        parts, position=("x", "y"),
+    )
+    sensors = {"image": Sensor("image", "gaussian",
+                               (Parameter("sigma", Positive(), Gamma(4.0, sigma / 4), 0.1),))}
+    return Model((cls,), sensors,
+                 InferenceSettings(p_jump=1.0, jump_weights=dict.fromkeys(weights, 1.0)),
+                 max_objects=max_objects)
 
 
 def one_tile() -> Model:
@@ -272,17 +291,7 @@ def one_tile() -> Model:
     broad enough for a grid of 31 x 31 cells, and births and deaths are accepted. Rays of
     the pixels the tile leaves unexplained land on it (it lies on the ground), so births
     aim at it."""
-    tile = ObjectClass(
-        "tile", 1.0,
-        (Parameter("x", Interval(-1.5, 1.5), Uniform(-1.5, 1.5), 0.3),
-         Parameter("y", Interval(-1.5, 1.5), Uniform(-1.5, 1.5), 0.3)),
-        _tile, position=("x", "y"),
-    )
-    sensors = {"image": Sensor("image", "gaussian",
-                               (Parameter("sigma", Positive(), Gamma(4.0, 0.15), 0.1),))}
-    weights = {"birth": 1.0, "death": 1.0, "replace": 1.0, "refit": 1.0}
-    return Model((tile,), sensors, InferenceSettings(p_jump=1.0, jump_weights=weights),
-                 max_objects=1)
+    return flat_world("tile", (1.6, 1.6), 1.5, 0.6, ("birth", "death", "replace", "refit"), 1)
 
 
 def joint_report(**kw) -> Report:
@@ -332,27 +341,12 @@ def thesis_ratio(monkeypatch):
     monkeypatch.setattr(Sampler, "log_alpha", log_alpha)
 
 
-def _strip(v):
-    return (Part("box", translation(v["x"], v["y"], 0) @ scaling(0.8, 40.0, 0.05),
-                 (0.9, 0.2, 0.2)),)
-
-
 def two_strips() -> Model:
     """At most two strips 40 m long, seen through noise so heavy (sigma near 2) that one, two
     or no strips are all likely, and births and deaths are often accepted. A strip reaches
     past the camera's view at either end wherever it lies, so the likelihood does not depend
     on y: the exact posterior needs one cell in y and 31 in x, 496 pairs of cells."""
-    strip = ObjectClass(
-        "strip", 1.0,
-        (Parameter("x", Interval(-1.5, 1.5), Uniform(-1.5, 1.5), 0.3),
-         Parameter("y", Interval(-1.0, 1.0), Uniform(-1.0, 1.0), 0.3)),
-        _strip, position=("x", "y"),
-    )
-    sensors = {"image": Sensor("image", "gaussian",
-                               (Parameter("sigma", Positive(), Gamma(4.0, 0.5), 0.1),))}
-    weights = {"birth": 1.0, "death": 1.0, "replace": 1.0}
-    return Model((strip,), sensors, InferenceSettings(p_jump=1.0, jump_weights=weights),
-                 max_objects=2)
+    return flat_world("strip", (0.8, 40.0), 1.0, 2.0, ("birth", "death", "replace"), 2)
 
 
 def strips_report(seed=0) -> Report:
