@@ -22,6 +22,7 @@ from .likelihoods import Gaussian, Likelihood, available_likelihoods, register_l
 from .model import Model
 from .observations import Observations, load_cameras, load_observations, write_observations
 from .posterior import load_run, open_posterior, write_posterior
+from .proposal_checks import check_proposals, joint_check
 from .render import Renderer, raycast
 from .run import run_chain, run_chains
 from .scoring import ReferenceScorer, Scorer
@@ -45,9 +46,11 @@ __all__ = [
     "Scorer",
     "SpplError",
     "available_likelihoods",
+    "check_proposals",
     "compare_scenes",
     "compile_model",
     "find_scenes",
+    "joint_check",
     "load_cameras",
     "load_model",
     "load_observations",

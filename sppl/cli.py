@@ -124,6 +124,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="width and height in pixels of the Geweke test's images (default: 8)")
     v.add_argument("--alpha", type=float, default=0.01,
                    help="family-wise false-alarm rate of the whole table (default: 0.01)")
+    v.add_argument("--proposal-draws", type=int, default=30,
+                   help="draws per check of a proposal that looks at the observations "
+                   "(sampler against density; 0: leave those checks out; default: 30)")
 
     e = sub.add_parser(
         "export",
@@ -496,6 +499,8 @@ def cmd_verify(args) -> int:
         raise UsageError(
             "--steps must be at least 100, --geweke-chains 2, --geweke-length 1, --size 4"
         )
+    if args.proposal_draws < 0:
+        raise UsageError("--proposal-draws must be 0 (off) or more")
     if not 0.0 < args.alpha < 1.0:
         raise UsageError("--alpha is a probability between 0 and 1")
     model = load_model(args.model)
@@ -503,6 +508,7 @@ def cmd_verify(args) -> int:
         model, steps=args.steps, seed=args.seed, run_geweke=args.geweke,
         geweke_chains=args.geweke_chains, geweke_length=args.geweke_length, size=args.size,
         alpha=args.alpha, progress=lambda message: print(message, file=sys.stderr, flush=True),
+        proposal_draws=args.proposal_draws,
     )
     print(f"{args.model}: verifying the sampler derived from this model")
     print(report.table())
