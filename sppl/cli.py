@@ -400,10 +400,10 @@ def cmd_simulate(args) -> int:
         objects = sample_objects(model, rng, progress=_still_drawing)
         noise = sample_noise(model, rng)
     with _claim_out(args.out) as claim:
-        try:
-            _prepare_out(args.out, args.force, kind="obs",
-                         inputs={"the model argument": args.model, "--cameras": args.cameras,
-                                 "--scene": args.scene})
+        _prepare_out(args.out, args.force, kind="obs",
+                     inputs={"the model argument": args.model, "--cameras": args.cameras,
+                             "--scene": args.scene})
+        try:  # the folder is empty (but for its lock): whatever is in it now is this command's
             frames = render_observations(model, objects, noise, cameras,
                                          Renderer(model.render), rng)
             write_observations(args.out, frames, depth_format=args.depth_format)
@@ -459,10 +459,10 @@ def _sample(args) -> int:
     model = load_model(args.model)
     obs = load_observations(args.obs)
     with _claim_out(args.out) as claim:
-        try:
-            if args.resume is None:
-                _prepare_out(args.out, args.force, kind="run",
-                             inputs={"the model argument": args.model, "--obs": args.obs})
+        if args.resume is None:
+            _prepare_out(args.out, args.force, kind="run",
+                         inputs={"the model argument": args.model, "--obs": args.obs})
+        try:  # a new run's folder is empty now: whatever comes into it is this run's
             result = run_chains(
                 model, obs, args.out, chains=args.chains, steps=args.steps, seed=args.seed,
                 thin=args.thin, burn=args.burn, progress=False if args.quiet else None,

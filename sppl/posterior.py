@@ -296,9 +296,13 @@ def write_posterior(folder: str | Path, out: str | Path | None = None, *,
     run = run or load_run(folder)
     out = Path(out) if out is not None else Path(folder) / POSTERIOR_FILE
     tree = to_datatree(posterior_arrays(run))
-    if out.exists():
-        out.unlink()
-    tree.to_netcdf(out, engine="h5netcdf")
+    try:
+        if out.exists():
+            out.unlink()
+        tree.to_netcdf(out, engine="h5netcdf")
+    except OSError as e:
+        raise SpplError(f"{out}: cannot write the posterior file ({e.strerror or e})",
+                        hint="check that its folder exists and can be written") from None
     return out
 
 
