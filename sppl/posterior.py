@@ -296,6 +296,9 @@ def write_posterior(folder: str | Path, out: str | Path | None = None, *,
     run = run or load_run(folder)
     out = Path(out) if out is not None else Path(folder) / POSTERIOR_FILE
     tree = to_datatree(posterior_arrays(run))
+    if out.is_dir() or (out.exists() and not _is_netcdf4(out)):
+        raise SpplError(f"{out}: exists and is not a posterior file, so it is not replaced",
+                        hint="choose another --out")
     try:
         if out.exists():
             out.unlink()
@@ -304,6 +307,16 @@ def write_posterior(folder: str | Path, out: str | Path | None = None, *,
         raise SpplError(f"{out}: cannot write the posterior file ({e.strerror or e})",
                         hint="check that its folder exists and can be written") from None
     return out
+
+
+def _is_netcdf4(path: Path) -> bool:
+    """Whether ``path`` is an HDF5 file (NetCDF4 is HDF5), or empty: one export may replace."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(8)
+    except OSError:
+        return False
+    return head in (b"", b"\x89HDF\r\n\x1a\n")
 
 
 def open_posterior(path: str | Path):

@@ -91,6 +91,8 @@ MISUSES = [
     ["export", "obs"],
     ["export", "model.scn"],
     ["export", "run", "--out", "nowhere/deeper/p.nc"],
+    ["export", "run", "--out", "model.scn"],  # it replaced the model file with the posterior
+    ["export", "run", "--out", "obs"],
     ["report", "nowhere"],
     ["report", "obs"],
     ["report", "run", "--truth", "scene.json", "--no-truth"],
