@@ -501,41 +501,20 @@ def cli_template(tmp_path_factory, require_gl):
     return d
 
 
-def snapshot(folder: Path) -> dict[str, tuple]:
-    return {str(p.relative_to(folder)): ("folder",) if p.is_dir() else
-            ("file", p.lstat().st_size, p.lstat().st_mtime_ns) for p in sorted(folder.rglob("*"))}
-
-
-def run_command_line(args: list[str], folder: Path) -> tuple[int, str]:
-    import contextlib
-
-    from sppl.cli import main
-
-    out, err, old = io.StringIO(), io.StringIO(), Path.cwd()
-    os.chdir(folder)
-    try:
-        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
-            try:
-                code = main(args)
-            except SystemExit as e:  # argparse: usage (2), or --help / --version (0)
-                code = e.code if isinstance(e.code, int) else 1
-    finally:
-        os.chdir(old)
-    return code, err.getvalue()
-
-
 def check_command_line(args, template: Path, scratch: Path) -> None:
     folder = scratch / "cli"
     if folder.exists():
         shutil.rmtree(folder)
     shutil.copytree(template, folder, symlinks=True)
-    before = snapshot(folder)
-    code, err = run_command_line(args, folder)
+    from test_misuse import run_main, tree
+
+    before = tree(folder)
+    code, err = run_main(args, folder)
     assert code in (0, 1, 2), (args, code, err)
     assert "Traceback" not in err, (args, err)
     if code != 0:
         assert err.strip(), args  # a failure says why
-        assert snapshot(folder) == before, (args, "a failed command changed the folder")
+        assert tree(folder) == before, (args, "a failed command changed the folder")
 
 
 @settings(QUICK, max_examples=40)

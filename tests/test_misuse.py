@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_errors import MODEL, good, observations
+from test_errors import MODEL, good
 
 from sppl.cli import main
 
