@@ -375,6 +375,8 @@ def match_to_map(model, map_objects, samples, radius: float = MATCH_RADIUS):
 
 
 def marginal_figures(model, map_objects, samples, truth, folder: Path) -> list[Figure]:
+    from matplotlib.ticker import MaxNLocator
+
     draws = _even(samples, MARGINAL_DRAWS)
     matches = match_to_map(model, map_objects, draws)
     true_of = {}
@@ -414,6 +416,9 @@ def marginal_figures(model, map_objects, samples, truth, folder: Path) -> list[F
                 ax.set_xlim(lo - pad, hi + pad)
                 ax.set_title(name, fontsize=9)
                 ax.set_yticks([])
+                # A panel is 2.4 in wide: at most four ticks, or their labels run together.
+                ax.xaxis.set_major_locator(MaxNLocator(nbins=3))
+                ax.tick_params(axis="x", labelsize=8)
         continuous = [ax for ax, name in zip(axes, names) if not isinstance(m["params"][name], str)]
         if continuous:
             continuous[0].legend(fontsize=7, frameon=False)
@@ -520,15 +525,24 @@ def _rate(n: int, a: int) -> str:
 
 
 def acceptance_html(summary: dict[str, Any]) -> str:
+    """Two tables: the object moves by class, and the noise moves by sensor (one table for
+    both had a column per class and per sensor, half of them empty in every row)."""
     table = _acceptance_table(summary)
+    objects = {m: cells for m, cells in table.items() if m != "noise"}
+    noise = {m: cells for m, cells in table.items() if m == "noise"}
+    return (_rates_table("move", objects, "class") + _rates_table("move", noise, "sensor"))
+
+
+def _rates_table(corner: str, table: dict[str, dict[str, tuple[int, int]]], per: str) -> str:
+    if not table:
+        return ""
     labels = sorted({lab for m in table.values() for lab in m if lab != "all"})
     head = "".join(f"<th>{html.escape(lab)}</th>" for lab in [*labels, "all"])
     rows = []
-    for move, cells in table.items():
-        tds = "".join(f"<td>{_rate(*cells[lab]) if lab in cells else ''}</td>"
-                      for lab in [*labels, "all"])
+    for move, cells in table.items():  # a class a move never reached: proposed 0 times
+        tds = "".join(f"<td>{_rate(*cells.get(lab, (0, 0)))}</td>" for lab in [*labels, "all"])
         rows.append(f"<tr><th>{html.escape(move)}</th>{tds}</tr>")
-    return f"<table><tr><th>move</th>{head}</tr>{''.join(rows)}</table>"
+    return (f"<table><tr><th>{corner} \\ {per}</th>{head}</tr>{''.join(rows)}</table>")
 
 
 def diagnostics_html(diag: dict[str, dict[str, float | None]], n_chains: int) -> str:
@@ -633,7 +647,8 @@ img { max-width: 100%; display: block; margin: 0.5em 0; }
 table { border-collapse: collapse; margin: 0.6em 0; font-size: 0.92em; }
 th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: left; }
 tr.warn td, tr.warn th { background: #fde8e8; }
-pre { background: #f6f6f6; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
+pre { background: #f6f6f6; padding: 0.8em; font-size: 0.85em; white-space: pre-wrap;
+      overflow-wrap: anywhere; }  /* long summary lines wrap, never cut off */
 .caption, .note { color: #555; font-size: 0.92em; }
 .explain { background: #f3f7fb; border-left: 3px solid #4c72b0; padding: 0.5em 0.8em; }
 """

@@ -26,6 +26,7 @@ from .checkpoint import (
     write_checkpoint,
 )
 from .errors import RunError, SpplError
+from .lock import hold
 from .model import Model
 from .observations import Observations
 from .samples import SampleWriter, format_summary, read_samples, summarise, truncate_samples
@@ -99,6 +100,16 @@ def run_chain(
     ``callback(step, trace, best, sampler)``, if given, is called after every sweep; returning
     True stops the run. ``seed`` is an integer or, for one of several chains, a
     ``SeedSequence`` spawned from the run's seed (``run_chains``)."""
+    out.mkdir(parents=True, exist_ok=True)
+    with hold(out):  # one writer per run folder (sppl.lock)
+        return _run_chain(model, observations, out, steps=steps, seed=seed, renderer=renderer,
+                          thin=thin, burn=burn, progress=progress, extra=extra,
+                          callback=callback, resume=resume,
+                          checkpoint_seconds=checkpoint_seconds)
+
+
+def _run_chain(model, observations, out, *, steps, seed, renderer, thin, burn, progress, extra,
+               callback, resume, checkpoint_seconds) -> RunResult:
     chain = ChainRun(model, observations, out, steps=steps, seed=seed, renderer=renderer,
                      thin=thin, burn=burn, extra=extra, callback=callback, resume=resume,
                      checkpoint_seconds=checkpoint_seconds)
@@ -412,12 +423,21 @@ def run_chains(
     ``resume=True`` each chain continues from its own checkpoint (see ``run_chain``). With
     ``lockstep=True`` the chains run in this process instead, advanced together
     (``sppl.lockstep``), and draw the same samples."""
-    import multiprocessing as mp
-
     if chains == 1:
         return run_chain(model, observations, out, steps=steps, seed=seed, thin=thin, burn=burn,
                          progress=progress, resume=resume, checkpoint_seconds=checkpoint_seconds,
                          extra={"lockstep": True} if lockstep else None)
+    out.mkdir(parents=True, exist_ok=True)
+    with hold(out):  # one writer per run folder (sppl.lock), for the run's life
+        return _run_chains(model, observations, out, chains=chains, steps=steps, seed=seed,
+                           thin=thin, burn=burn, progress=progress, resume=resume,
+                           checkpoint_seconds=checkpoint_seconds, lockstep=lockstep)
+
+
+def _run_chains(model, observations, out, *, chains, steps, seed, thin, burn, progress, resume,
+                checkpoint_seconds, lockstep) -> RunResult:
+    import multiprocessing as mp
+
     write_chains_record(model, observations, out, chains=chains, steps=steps, seed=seed,
                         thin=thin, burn=burn, resume=resume, lockstep=lockstep)
     seeds = chain_seeds(seed, chains)

@@ -115,21 +115,48 @@ def test_the_posterior_file_pads_objects_into_slots(two_chains, tmp_path, capsys
     assert dict(post.sizes)["chain"] == 2
     assert dict(post.sizes)["draw"] == STEPS - summary["burn"] + 1
     assert list(post["class"].values) == ["cube", "cone", "sphere"]
-    exists = post["exists"].values
+    exists = post["exists"].values.astype(bool)
     n = post["n_objects"].values
     assert (exists.sum(axis=-1) == n).all()
     assert (post["count"].values.sum(axis=-1) == n).all()
     # Real objects come first in their slots; every empty slot is NaN / "".
     assert (np.diff(exists.astype(int), axis=-1) <= 0).all()
     assert np.isnan(post["x"].values[~exists]).all() and np.isfinite(post["x"].values[exists]).all()
-    assert (post["object_class"].values[~exists] == "").all()
-    assert set(np.unique(post["c"].values[exists])) <= {"red", "green", "blue"}
-    # The chain-0 draws are the chain's samples after burn-in, in order.
+    assert (post["object_class"].values[~exists] == -1).all()
+    assert (post["c"].values[~exists] == -1).all()
+    assert set(post["c_label"].values) <= {"red", "green", "blue"}
+    assert post["c"].attrs["flag_meanings"].split() == list(post["c_label"].values)
+    # The chain-0 draws are the chain's samples after burn-in, in order, numbered by sweep.
     kept = [s for s in read_samples(two_chains / "chain_0" / "samples.jsonl")
-            if s["step"] >= summary["burn"]][-post.sizes["draw"]:]
+            if s["step"] >= summary["burn"]][: post.sizes["draw"]]
+    assert list(post["draw"].values) == [s["step"] for s in kept]
+    assert (stats["step"].values == post["draw"].values).all()
     assert np.allclose(stats["lp"].values[0], [s["score"] for s in kept])
     assert (n[0] == [len(s["objects"]) for s in kept]).all()
+    classes = list(post["class"].values)
+    first = sorted(kept[0]["objects"], key=lambda o: (classes.index(o["class"]),
+                                                      o["params"]["x"], o["params"]["y"]))
+    assert [classes[k] for k in post["object_class"].values[0, 0, : len(first)]] == \
+        [o["class"] for o in first]
+    colours = list(post["c_label"].values)
+    assert [colours[k] for k in post["c"].values[0, 0, : len(first)]] == \
+        [o["params"]["c"] for o in first]
     assert tree.attrs["seed"] == 5 and tree.attrs["chains"] == 2
+
+
+def test_the_posterior_file_opens_in_arviz_summary_with_no_arguments(two_chains):
+    """Every variable is a number: string categoricals in the posterior group made ArviZ's
+    summary fail with a TypeError."""
+    import warnings
+
+    import arviz_stats
+    import xarray as xr
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # R-hat of a slot that never changes
+        table = arviz_stats.summary(xr.open_datatree(two_chains / "posterior.nc"))
+    assert {"n_objects", "count[cube]", "object_class[0]", "c[0]", "exists[0]"} <= set(table.index)
+    assert table.loc["n_objects", "mean"] > 0
 
 
 def test_one_chain_keeps_its_layout_and_gets_a_posterior_file(model, obs, tmp_path):
