@@ -14,12 +14,15 @@ __version__ = "0.1.0"
 
 from .chain import Sampler
 from .compare import compare_scenes
+from .dataset import find_scenes, run_dataset
 from .errors import ModelError, ObservationError, RenderError, RunError, SpplError
 from .lang import compile_model, load_model, parse
+from .executors import LocalExecutor, RayExecutor
 from .likelihoods import Gaussian, Likelihood, available_likelihoods, register_likelihood
 from .model import Model
 from .observations import Observations, load_cameras, load_observations, write_observations
 from .posterior import load_run, open_posterior, write_posterior
+from .proposal_checks import check_proposals, joint_check
 from .render import Renderer, raycast
 from .robust import Mixture, StudentT
 from .run import run_chain, run_chains
@@ -30,11 +33,13 @@ from .verify import verify_model
 __all__ = [
     "Gaussian",
     "Likelihood",
+    "LocalExecutor",
     "Mixture",
     "Model",
     "ModelError",
     "ObservationError",
     "Observations",
+    "RayExecutor",
     "ReferenceScorer",
     "RenderError",
     "Renderer",
@@ -44,8 +49,11 @@ __all__ = [
     "SpplError",
     "StudentT",
     "available_likelihoods",
+    "check_proposals",
     "compare_scenes",
     "compile_model",
+    "find_scenes",
+    "joint_check",
     "load_cameras",
     "load_model",
     "load_observations",
@@ -57,6 +65,7 @@ __all__ = [
     "render_observations",
     "run_chain",
     "run_chains",
+    "run_dataset",
     "sample_noise",
     "sample_objects",
     "verify_model",

@@ -8,8 +8,10 @@ when interrupted.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
+import os
 import shutil
 import sys
 from pathlib import Path
@@ -96,6 +98,14 @@ def _parser() -> argparse.ArgumentParser:
                    metavar="SECONDS",
                    help="save each chain's full state this often, for --resume "
                    f"(default: {CHECKPOINT_SECONDS:g})")
+    r.add_argument("--workers", type=int, default=None,
+                   help="with a data set (--obs naming a folder of observation folders, or a "
+                   "list file): how many tasks (scene x chain) run at once on this machine "
+                   "(default: one per CPU core)")
+    r.add_argument("--cluster", default=None, metavar="WHERE",
+                   help="with a data set: where its tasks run: local (worker processes, the "
+                   "default), ray (the Ray cluster in RAY_ADDRESS or on this machine, else a "
+                   "private one), ray://HOST:PORT or HOST:PORT")
 
     v = sub.add_parser(
         "verify",
@@ -116,6 +126,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="width and height in pixels of the Geweke test's images (default: 8)")
     v.add_argument("--alpha", type=float, default=0.01,
                    help="family-wise false-alarm rate of the whole table (default: 0.01)")
+    v.add_argument("--proposal-draws", type=int, default=30,
+                   help="draws per check of a proposal that looks at the observations "
+                   "(sampler against density; 0: leave those checks out; default: 30)")
 
     e = sub.add_parser(
         "export",
@@ -151,14 +164,24 @@ OUT_KINDS = {
         "what": "a run folder", "writer": "`sppl sample`",
         "markers": {"run.json", "samples.jsonl", "summary.json", "checkpoint.json"},
         "files": {"run.json", "samples.jsonl", "summary.json", "summary.txt", "checkpoint.json",
-                  "checkpoint.json.tmp", "posterior.nc", ".sppl-write-test"},
+                  "checkpoint.json.tmp", "posterior.nc", "task.json", ".sppl-write-test",
+                  ".sppl-lock"},
         "folders": {"report"},  # and chain_<i>/, each a run folder of one chain
         "chains": True,
+    },
+    "dataset": {
+        "what": "a data-set run folder", "writer": "`sppl sample` on a data set",
+        "markers": {"dataset.json"},
+        "files": {"dataset.json", "summary.json", "summary.txt", ".sppl-write-test",
+                  ".sppl-lock"},
+        "folders": set(),  # and one run folder a scene
+        "chains": False,
+        "scenes": True,
     },
     "obs": {
         "what": "an observation folder", "writer": "`sppl simulate`",
         "markers": {"transforms.json"},
-        "files": {"transforms.json", "scene.json", ".sppl-write-test"},
+        "files": {"transforms.json", "scene.json", ".sppl-write-test", ".sppl-lock"},
         "folders": {"images", "depth"},
         "chains": False,
     },
@@ -182,6 +205,10 @@ def _not_ours(folder: Path, kind: str, prefix: str = "") -> str | None:
             inner = _not_ours(entry, kind, prefix=f"{entry.name}/")
             if inner:
                 return inner
+        elif entry.is_dir() and spec.get("scenes"):
+            inner = _not_ours(entry, "run")
+            if inner:
+                return f"{entry.name}/ is not a run folder: {inner}"
         elif entry.name not in (spec["folders"] if entry.is_dir() else spec["files"]):
             return f"it holds {name}, which {spec['writer']} does not write"
     if not prefix and not set(names) & spec["markers"] and not any(map(_is_chain_folder, names)):
@@ -200,7 +227,10 @@ def _prepare_out(out: Path, force: bool, *, kind: str = "run",
     refused without ``force``; with it, it is deleted only if it looks like a ``kind``
     output folder of sppl's (``OUT_KINDS``) and holds neither the current folder nor any of
     the ``inputs`` (what the command reads, by the option that names it)."""
-    if out.is_symlink() or (out.exists() and (not out.is_dir() or any(out.iterdir()))):
+    from .lock import LOCK_FILE, FolderInUse, held, holder
+
+    if out.is_symlink() or (out.exists() and (
+            not out.is_dir() or any(e.name != LOCK_FILE for e in out.iterdir()))):
         if not force:
             raise UsageError(f"{out} already exists; choose another --out or add --force to replace it")
         spec = OUT_KINDS[kind]
@@ -223,7 +253,15 @@ def _prepare_out(out: Path, force: bool, *, kind: str = "run",
             raise UsageError(f"{out}: --force replaces only {spec['what']} that {spec['writer']} "
                              f"wrote, and this does not look like one ({why}); remove it yourself "
                              "or choose another --out")
-        shutil.rmtree(out)
+        # Never delete what a live process writes: the folder, or a chain's folder in it
+        # (whose worker may outlive a killed parent).
+        for folder in (out, *(e for e in out.iterdir() if e.is_dir())):
+            pid = None if held(folder) else holder(folder)
+            if pid:
+                raise FolderInUse(f"another sppl process (pid {pid}) is writing {folder}; "
+                                  "--force does not delete it", path=out,
+                                  hint="wait for it to finish or stop it, or choose another --out")
+        _empty(out)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -236,6 +274,88 @@ def _prepare_out(out: Path, force: bool, *, kind: str = "run",
     except OSError as e:
         raise UsageError(f"{out}: cannot write in the output folder ({e.strerror}); choose "
                          "another --out") from None
+
+
+def _empty(folder: Path) -> None:
+    """Delete everything in ``folder`` but its lock file, which its writer holds."""
+    from .lock import LOCK_FILE
+
+    for entry in folder.iterdir():
+        if entry.name == LOCK_FILE:
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry)
+        else:
+            entry.unlink()
+
+
+class _Claim:
+    """An output folder this command holds the lock of; ``discard()`` asks for what it wrote
+    to be removed when the command ends (a command that fails leaves nothing half-written)."""
+
+    def __init__(self, out: Path, created: list[Path]) -> None:
+        self.out, self.created, self.discarding = out, created, False
+
+    def discard(self) -> None:
+        self.discarding = True
+
+
+@contextlib.contextmanager
+def _claim_out(out: Path):
+    """Hold ``out``'s lock (``sppl.lock``) for the block, making the folder if it is missing;
+    a second writer meets a one-line error naming this process. A path that is a file or a
+    link is left to ``_prepare_out`` to refuse."""
+    from .lock import FolderInUse, hold, held, holder
+
+    for folder in out.resolve().parents:  # a run's chain_<i>/ is its run's to write
+        pid = None if held(folder) else holder(folder)
+        if pid:
+            raise FolderInUse(f"{out} is inside {folder}, which another sppl process (pid {pid}) "
+                              "is writing", hint="choose another --out")
+    if out.is_symlink() or (out.exists() and not out.is_dir()):
+        yield _Claim(out, [])
+        return
+    created = [p for p in (out, *out.parents) if not p.exists() and not p.is_symlink()]
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise UsageError(f"{out}: cannot create the output folder ({e.strerror}); choose "
+                         "another --out") from None
+    claim = _Claim(out, created)
+    try:
+        try:
+            lock = hold(out)
+            lock.__enter__()
+        except OSError as e:
+            raise UsageError(f"{out}: cannot write in the output folder ({e.strerror}); choose "
+                             "another --out") from None
+        try:
+            yield claim
+        except BaseException:
+            if claim.discarding:
+                _empty(out)
+            raise
+        finally:
+            lock.__exit__(None, None, None)
+    except BaseException:
+        for folder in created:  # innermost first; only those this command made, once empty
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
+
+
+def _wrote_samples(out: Path) -> bool:
+    return any(p.stat().st_size > 0 for p in (*out.glob("samples.jsonl"),
+                                               *out.glob("chain_*/samples.jsonl")))
+
+
+SEED_MAX = 2**63 - 1  # a 64-bit integer: what run.json, checkpoints and posterior.nc store
+
+
+def _check_seed(seed: int | None) -> None:
+    if seed is not None and not 0 <= seed <= SEED_MAX:
+        raise UsageError(f"--seed must be a whole number from 0 to 2**63 - 1 ({SEED_MAX}), "
+                         f"got {seed}")
 
 
 def cmd_check(args) -> int:
@@ -297,6 +417,7 @@ def cmd_simulate(args) -> int:
     from .render import Renderer
     from .simulate import load_scene, render_observations, sample_noise, sample_objects, scene_dict
 
+    _check_seed(args.seed)
     model = load_model(args.model)
     cameras = load_cameras(args.cameras)
     rng = np.random.default_rng(np.random.SeedSequence(args.seed))
@@ -304,29 +425,51 @@ def cmd_simulate(args) -> int:
         objects, noise = load_scene(model, args.scene)
         noise = noise or sample_noise(model, rng)
     else:
-        objects = sample_objects(model, rng)
+        objects = sample_objects(model, rng, progress=_still_drawing)
         noise = sample_noise(model, rng)
-    _prepare_out(args.out, args.force, kind="obs",
-                 inputs={"the model argument": args.model, "--cameras": args.cameras,
-                         "--scene": args.scene})
-    frames = render_observations(model, objects, noise, cameras, Renderer(model.render), rng)
-    write_observations(args.out, frames, depth_format=args.depth_format)
-    scene = scene_dict(objects, noise)
-    (args.out / "scene.json").write_text(json.dumps(scene, indent=2) + "\n")
+    with _claim_out(args.out) as claim:
+        _prepare_out(args.out, args.force, kind="obs",
+                     inputs={"the model argument": args.model, "--cameras": args.cameras,
+                             "--scene": args.scene})
+        try:  # the folder is empty (but for its lock): whatever is in it now is this command's
+            frames = render_observations(model, objects, noise, cameras,
+                                         Renderer(model.render), rng)
+            write_observations(args.out, frames, depth_format=args.depth_format)
+            scene = scene_dict(objects, noise)
+            (args.out / "scene.json").write_text(json.dumps(scene, indent=2) + "\n")
+        except BaseException:
+            claim.discard()
+            raise
     print(f"wrote {len(frames)} frames and the true scene ({len(objects)} objects) to {args.out}")
     return 0
 
 
 def cmd_sample(args) -> int:
+    if args.resume is not None:
+        if not args.resume.is_dir():
+            from .run import read_run
+
+            read_run(args.resume)  # its error says what --resume takes
+        with _claim_out(args.resume):  # no other process may write it while it is read
+            _resume_settings(args)
+            return _sample(args)
+    return _sample(args)
+
+
+def _still_drawing(tries: int, seconds: float) -> None:
+    print(f"still drawing a scene from the prior that keeps the model's constraints: {tries} "
+          f"draws rejected in {seconds:.0f} s", file=sys.stderr, flush=True)
+
+
+def _sample(args) -> int:
+    from .dataset import is_dataset
     from .lang import load_model
     from .observations import load_observations
     from .posterior import write_posterior
     from .run import run_chains
     from .samples import format_summary
 
-    if args.resume is not None:
-        _resume_settings(args)
-    else:
+    if args.resume is None:
         if args.model is None or args.obs is None:
             raise UsageError("sample needs a model file and --obs (or --resume RUN)")
         args.out = args.out or Path("run")
@@ -339,27 +482,78 @@ def cmd_sample(args) -> int:
         raise UsageError("--steps, --thin and --chains must be at least 1")
     if not args.checkpoint_every >= 0:
         raise UsageError("--checkpoint-every is a number of seconds, 0 or more")
+    if args.burn is not None and args.burn < 0:
+        raise UsageError("--burn is a number of sweeps, 0 or more")
+    _check_seed(args.seed)
     model = load_model(args.model)
+    if args.resume is None and is_dataset(args.obs):
+        return _sample_dataset(args, model)
+    if args.workers is not None or args.cluster is not None:
+        raise UsageError("--workers and --cluster run the tasks of a data set; --obs names one "
+                         "observation folder (see docs/datasets.md)")
     obs = load_observations(args.obs)
-    if args.resume is None:
-        _prepare_out(args.out, args.force, kind="run",
-                     inputs={"the model argument": args.model, "--obs": args.obs})
-    result = run_chains(
-        model, obs, args.out, chains=args.chains, steps=args.steps, seed=args.seed,
-        thin=args.thin, burn=args.burn, progress=False if args.quiet else None,
-        resume=args.resume is not None, checkpoint_seconds=args.checkpoint_every,
-        lockstep=args.lockstep,
-    )
-    print(format_summary(result.summary))
-    samples = args.out / ("samples.jsonl" if args.chains == 1 else "chain_*/samples.jsonl")
-    print(f"samples: {samples}; summary: {args.out / 'summary.json'}")
-    try:
-        print(f"posterior (ArviZ): {write_posterior(args.out)}")
-    except SpplError as e:
-        print(f"no posterior file: {e}", file=sys.stderr)
+    with _claim_out(args.out) as claim:
+        if args.resume is None:
+            _prepare_out(args.out, args.force, kind="run",
+                         inputs={"the model argument": args.model, "--obs": args.obs})
+        try:  # a new run's folder is empty now: whatever comes into it is this run's
+            result = run_chains(
+                model, obs, args.out, chains=args.chains, steps=args.steps, seed=args.seed,
+                thin=args.thin, burn=args.burn, progress=False if args.quiet else None,
+                resume=args.resume is not None, checkpoint_seconds=args.checkpoint_every,
+                lockstep=args.lockstep,
+            )
+        except BaseException:
+            if args.resume is None and not _wrote_samples(args.out):
+                claim.discard()  # it failed before its first sample: leave nothing behind
+            raise
+        print(format_summary(result.summary))
+        samples = args.out / ("samples.jsonl" if args.chains == 1 else "chain_*/samples.jsonl")
+        print(f"samples: {samples}; summary: {args.out / 'summary.json'}")
+        try:
+            print(f"posterior (ArviZ): {write_posterior(args.out)}")
+        except SpplError as e:
+            print(f"no posterior file: {e}", file=sys.stderr)
     if result.summary["interrupted"]:
         print(f"to continue: sppl sample --resume {args.out}", file=sys.stderr)
         return 130
+    return 0
+
+
+def _sample_dataset(args, model) -> int:
+    """``sppl sample`` over a data set: every scene x chain a task, one run folder a scene in
+    ``--out``; rerunning the same command continues what an earlier run left unfinished."""
+    from .dataset import DATASET_RECORD, format_dataset_summary, run_dataset
+    from .executors import make_executor
+
+    if args.lockstep:
+        raise UsageError("--lockstep runs the chains of one scene in this process; a data set's "
+                         "chains run as tasks (leave out --lockstep)")
+    executor = make_executor(args.cluster, args.workers)
+    out = args.out
+
+    def prepare_out():
+        if not (out / DATASET_RECORD).is_file() or args.force:  # else: continue that run
+            _prepare_out(out, args.force, kind="dataset",
+                         inputs={"the model argument": args.model, "--obs": args.obs})
+
+    with _claim_out(out):  # one writer per data-set folder too
+        result = run_dataset(
+            model, args.obs, out, chains=args.chains, steps=args.steps, seed=args.seed,
+            thin=args.thin, burn=args.burn, executor=executor,
+            checkpoint_seconds=args.checkpoint_every, progress=False if args.quiet else None,
+            on_scene=lambda name, line: print(line, flush=True), prepare_out=prepare_out,
+        )
+    summary = result.summary
+    print(format_dataset_summary(summary))
+    print(f"per scene: {out}/<scene>/; data-set summary: {out / 'summary.json'}")
+    if summary["interrupted"] or summary["finished"] + summary["failed"] < summary["scenes"]:
+        print("to continue: run the same command again", file=sys.stderr)
+        return 130
+    if summary["failed"]:
+        first = next(r["error"] for r in summary["per_scene"] if "error" in r)
+        raise SpplError(f"{summary['failed']} of {summary['scenes']} scenes failed; the first: "
+                        f"{first}")
     return 0
 
 
@@ -369,6 +563,9 @@ def _resume_settings(args) -> None:
     from .run import read_run
 
     run = args.resume
+    if (run / "dataset.json").is_file():
+        raise UsageError(f"{run} is a data set's run; to continue it, run the command that "
+                         "started it again (it skips finished tasks and resumes stopped ones)")
     if args.out is not None and args.out.resolve() != run.resolve():
         raise UsageError("--resume continues a run in its own folder; leave out --out")
     if args.force:
@@ -430,10 +627,13 @@ def cmd_verify(args) -> int:
     from .lang import load_model
     from .verify import verify_model
 
+    _check_seed(args.seed)
     if args.steps < 100 or args.geweke_chains < 2 or args.geweke_length < 1 or args.size < 4:
         raise UsageError(
             "--steps must be at least 100, --geweke-chains 2, --geweke-length 1, --size 4"
         )
+    if args.proposal_draws < 0:
+        raise UsageError("--proposal-draws must be 0 (off) or more")
     if not 0.0 < args.alpha < 1.0:
         raise UsageError("--alpha is a probability between 0 and 1")
     model = load_model(args.model)
@@ -441,6 +641,7 @@ def cmd_verify(args) -> int:
         model, steps=args.steps, seed=args.seed, run_geweke=args.geweke,
         geweke_chains=args.geweke_chains, geweke_length=args.geweke_length, size=args.size,
         alpha=args.alpha, progress=lambda message: print(message, file=sys.stderr, flush=True),
+        proposal_draws=args.proposal_draws,
     )
     print(f"{args.model}: verifying the sampler derived from this model")
     print(report.table())
@@ -465,3 +666,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # The reader of the output went away (`sppl check m.scn | head`): nothing to tell
+        # it, and Python's flush at exit must not fail on the pipe again.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1

@@ -23,6 +23,48 @@ from .geometry import Part, footprint_of
 
 Values = Mapping[str, Any]
 
+# The most objects a scene may hold: each sweep moves every object, and every move renders the
+# scene, so a chain over scenes of thousands of objects would not finish. A model whose prior
+# puts more than SCENE_TAIL of its mass on bigger scenes is refused when it is compiled.
+MAX_SCENE_OBJECTS = 1000
+SCENE_TAIL = 1e-6
+_COUNT_TRIES = 1000  # Poisson draws tried for a truncated count before drawing it exactly
+
+
+def count_log_pmf(rate: float, upto: int) -> np.ndarray:
+    """log P(N = n) for n = 0..upto, N ~ Poisson(rate) truncated to at most ``upto``."""
+    n = np.arange(upto + 1, dtype=float)
+    from scipy.special import gammaln
+
+    log_p = n * math.log(rate) - rate - gammaln(n + 1) if rate > 0 else np.where(n == 0, 0.0,
+                                                                                  -np.inf)
+    return log_p - np.logaddexp.reduce(log_p)
+
+
+def probability_of_more_objects(classes: Sequence[ObjectClass], limit: int) -> float:
+    """P(the classes' counts add up to more than ``limit``) under their priors (fixed, Poisson,
+    or Poisson truncated at ``max_count``), ignoring every other constraint."""
+    from scipy.stats import poisson
+
+    total = np.zeros(limit + 2)  # P(total = 0..limit), and in the last entry P(total > limit)
+    total[0] = 1.0
+    for cls in classes:
+        if cls.count is not None:
+            pmf = np.zeros(limit + 2)
+            pmf[min(cls.count, limit + 1)] = 1.0
+        elif cls.max_count is not None:
+            pmf = np.zeros(limit + 2)
+            top = min(cls.max_count, limit)
+            pmf[: top + 1] = np.exp(count_log_pmf(cls.rate, cls.max_count)[: top + 1])
+            if cls.max_count > limit:
+                pmf[limit + 1] = max(0.0, 1.0 - pmf[: limit + 1].sum())
+        else:
+            pmf = np.append(poisson.pmf(np.arange(limit + 1), cls.rate),
+                            poisson.sf(limit, cls.rate))
+        both = np.convolve(total, pmf)
+        total = np.append(both[: limit + 1], both[limit + 1 :].sum())
+    return float(min(1.0, max(0.0, total[limit + 1])))
+
 
 @dataclass(frozen=True)
 class Parameter:
@@ -134,10 +176,15 @@ class ObjectClass:
         """A draw of the number of objects of this class, ignoring any other constraint."""
         if self.count is not None:
             return self.count
-        while True:
+        for _ in range(_COUNT_TRIES):
             n = int(rng.poisson(self.rate))
             if self.max_count is None or n <= self.max_count:
                 return n
+        # A bound far below the rate: rejection would take forever, so draw from the
+        # truncated Poisson itself. Exact either way: both draw from Poisson given n <= max.
+        log_p = count_log_pmf(self.rate, self.max_count)
+        p = np.exp(log_p - log_p.max())
+        return int(rng.choice(len(p), p=p / p.sum()))
 
     def parts(self, values: Values) -> tuple[Part, ...]:
         return tuple(self.build(values))

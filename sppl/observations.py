@@ -33,6 +33,7 @@ Every problem a user can cause is an ``ObservationError`` naming the file and th
 from __future__ import annotations
 
 import json
+import logging
 import math
 import os
 import re
@@ -58,6 +59,8 @@ _DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")
 _GREY_MODES = ("1", "L", "LA", "La", "I", "I;16", "I;16B", "I;16L", "I;16N", "F")
 _INTEGER_DEPTH_MODES = ("I;16", "I;16B", "I;16L", "I;16N", "I")
 _MM = 0.001
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -268,6 +271,11 @@ def _load_frame(r: _FrameReader, names: set[str]) -> Frame:
     if raw_depth is not None:
         with np.errstate(invalid="ignore"):
             valid = np.isfinite(raw_depth) & (raw_depth > 0)
+            negative = int(np.sum(raw_depth < 0))
+        if negative:  # a sensor's "no reading" mark, or a map with an offset: say which
+            log.warning("%s: frames[%d]: %d depth pixel%s below zero (down to %.3g m) taken as "
+                        "missing, no measurement", depth_path, r.index, negative,
+                        "s" if negative != 1 else "", float(np.nanmin(raw_depth)))
         if not valid.any():
             raise r.error(
                 "every pixel of the depth map is missing (0, NaN or inf)",

@@ -7,14 +7,17 @@ The file, ``run/posterior.nc``, is NetCDF4 in the ArviZ layout (groups ``posteri
 ``sample_stats``, dimensions ``(chain, draw, ...)``), readable with
 ``xarray.open_datatree(path, engine="h5netcdf")`` or arviz 0.x ``az.from_netcdf(path)``.
 A scene holds a varying number of objects, so objects are stored in ``slot``s padded to the
-largest number any stored sample has: ``exists`` says which slots hold an object, the class is
-``object_class`` ("" in an empty slot), and each parameter name of any class is one variable
-(NaN, or "" for a categorical one, where the slot is empty or the object's class has no such
-parameter). Slots are ordered by class (the model's order), then x, then y. The order of
-objects means nothing (the scene is a set; slot 0 in one draw need not be the same object as
-slot 0 in the next), so R-hat and ESS are computed only for *label-invariant* quantities: the
-number of objects, the number of each class, the log joint, the log likelihood and the noise
-scales.
+largest number any stored sample has: ``exists`` (1 or 0) says which slots hold an object, the
+class is ``object_class``, and each parameter name of any class is one variable (NaN where the
+slot is empty or the object's class has no such parameter). Every variable is a number, so that
+``arviz_stats.summary(tree)`` takes the file as it is: a categorical one (``object_class``, a
+colour) is an integer code, -1 in an empty slot, with its labels as a coordinate (``class``,
+``<name>_label``) and the CF attributes ``flag_values`` and ``flag_meanings``. ``draw`` is the
+sweep number of each draw, the same in every chain. Slots are ordered by class (the model's
+order), then x, then y. The order of objects means nothing (the scene is a set; slot 0 in one
+draw need not be the same object as slot 0 in the next), so R-hat and ESS are computed only for
+*label-invariant* quantities: the number of objects, the number of each class, the log joint,
+the log likelihood and the noise scales.
 """
 
 from __future__ import annotations
@@ -143,8 +146,14 @@ def posterior_arrays(run: RunFiles, burn: int | None = None) -> Posterior:
     per_chain = [k for k in kept_samples(run, burn) if k]
     if not per_chain:
         raise SpplError(f"{run.folder}: no samples after the burn-in of {run.burn} steps")
-    n_draws = min(len(k) for k in per_chain)
-    per_chain = [k[-n_draws:] for k in per_chain]
+    # The draws are the sweeps every chain has (a chain stopped early has fewer), so that a
+    # draw is one sweep number across chains: the file's draw coordinate.
+    common = set.intersection(*({s["step"] for s in k} for k in per_chain))
+    per_chain = [[s for s in k if s["step"] in common] for k in per_chain]
+    n_draws = len(common)
+    if n_draws == 0 or any(len(k) != n_draws for k in per_chain):
+        raise SpplError(f"{run.folder}: the chains' samples share no sweep numbers, or repeat "
+                        "one (was the folder written by two runs at once?)")
     n_chains = len(per_chain)
     classes = run.class_names
     class_index = {c: i for i, c in enumerate(classes)}
@@ -203,7 +212,8 @@ def posterior_arrays(run: RunFiles, burn: int | None = None) -> Posterior:
     return Posterior(
         variables=variables,
         dims=dims,
-        coords={"class": classes, "slot": list(range(n_slots))},
+        coords={"class": classes, "slot": list(range(n_slots)),
+                "draw": [int(x) for x in step[0]]},
         stats={"lp": lp, "log_likelihood": loglik, "step": step},
         attrs=_attrs(run, n_chains, n_draws),
         class_names=classes,
@@ -216,8 +226,9 @@ def _attrs(run: RunFiles, n_chains: int, n_draws: int) -> dict[str, Any]:
     attrs: dict[str, Any] = {
         "sppl_version": __version__,
         "sampled_with": meta.get("sppl_version"),
+        # An integer NetCDF stores (a 64-bit one), or the record as JSON text.
         "seed": (meta.get("seed") if isinstance(meta.get("seed"), int)
-                 else json.dumps(meta.get("seed"))),
+                 and 0 <= meta["seed"] < 2**63 else json.dumps(meta.get("seed"))),
         "chains": n_chains,
         "draws_per_chain": n_draws,
         "steps": meta.get("steps"),
@@ -240,15 +251,43 @@ def _attrs(run: RunFiles, n_chains: int, n_draws: int) -> dict[str, Any]:
 
 
 def to_datatree(post: Posterior):
-    """The posterior as an ``xarray.DataTree`` in the ArviZ layout (via arviz-base)."""
-    import arviz_base
+    """The posterior as an ``xarray.DataTree`` in the ArviZ layout (via arviz-base).
 
-    return arviz_base.from_dict(
-        {"posterior": post.variables, "sample_stats": post.stats},
+    Every variable of the file is a number, so that ArviZ's functions take the whole group
+    (``arviz_stats.summary(tree)``): ``exists`` is 0 or 1, and a categorical variable (the
+    class of a slot's object, a colour) is an integer code, -1 in an empty slot, whose labels
+    are the coordinate ``class`` for ``object_class`` and ``<name>_label`` for a parameter,
+    and the CF attributes ``flag_values`` and ``flag_meanings``. ``draw`` is the sweep number."""
+    import arviz_base
+    import xarray as xr
+
+    variables = dict(post.variables)
+    flags: dict[str, tuple[list[int], list[str]]] = {"exists": ([0, 1], ["empty", "object"])}
+    variables["exists"] = variables["exists"].astype(np.int8)
+    for name, values in post.variables.items():
+        if values.dtype.kind != "U":
+            continue
+        labels = (list(post.class_names) if name == "object_class"
+                  else sorted(set(values.ravel()) - {""}))
+        codes = np.full(values.shape, -1, dtype=np.int16)
+        for i, label in enumerate(labels):
+            codes[values == label] = i
+        variables[name] = codes
+        flags[name] = (list(range(len(labels))), labels)
+    tree = arviz_base.from_dict(
+        {"posterior": variables, "sample_stats": post.stats},
         dims=post.dims,
         coords=post.coords,
         attrs={"/": post.attrs},
     )
+    group = tree["posterior"].to_dataset()
+    for name, (values, labels) in flags.items():
+        group[name].attrs.update(flag_values=np.array(values, dtype=np.int16),
+                                 flag_meanings=" ".join(labels))
+        if name not in ("exists", "object_class"):  # object_class's labels: the class coordinate
+            group = group.assign_coords({f"{name}_label": labels})
+    tree["posterior"] = xr.DataTree(group)
+    return tree
 
 
 def write_posterior(folder: str | Path, out: str | Path | None = None, *,
@@ -257,10 +296,27 @@ def write_posterior(folder: str | Path, out: str | Path | None = None, *,
     run = run or load_run(folder)
     out = Path(out) if out is not None else Path(folder) / POSTERIOR_FILE
     tree = to_datatree(posterior_arrays(run))
-    if out.exists():
-        out.unlink()
-    tree.to_netcdf(out, engine="h5netcdf")
+    if out.is_dir() or (out.exists() and not _is_netcdf4(out)):
+        raise SpplError(f"{out}: exists and is not a posterior file, so it is not replaced",
+                        hint="choose another --out")
+    try:
+        if out.exists():
+            out.unlink()
+        tree.to_netcdf(out, engine="h5netcdf")
+    except OSError as e:
+        raise SpplError(f"{out}: cannot write the posterior file ({e.strerror or e})",
+                        hint="check that its folder exists and can be written") from None
     return out
+
+
+def _is_netcdf4(path: Path) -> bool:
+    """Whether ``path`` is an HDF5 file (NetCDF4 is HDF5), or empty: one export may replace."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(8)
+    except OSError:
+        return False
+    return head in (b"", b"\x89HDF\r\n\x1a\n")
 
 
 def open_posterior(path: str | Path):

@@ -26,6 +26,7 @@ from .checkpoint import (
     write_checkpoint,
 )
 from .errors import RunError, SpplError
+from .lock import hold
 from .model import Model
 from .observations import Observations
 from .samples import SampleWriter, format_summary, read_samples, summarise, truncate_samples
@@ -99,6 +100,16 @@ def run_chain(
     ``callback(step, trace, best, sampler)``, if given, is called after every sweep; returning
     True stops the run. ``seed`` is an integer or, for one of several chains, a
     ``SeedSequence`` spawned from the run's seed (``run_chains``)."""
+    out.mkdir(parents=True, exist_ok=True)
+    with hold(out):  # one writer per run folder (sppl.lock)
+        return _run_chain(model, observations, out, steps=steps, seed=seed, renderer=renderer,
+                          thin=thin, burn=burn, progress=progress, extra=extra,
+                          callback=callback, resume=resume,
+                          checkpoint_seconds=checkpoint_seconds)
+
+
+def _run_chain(model, observations, out, *, steps, seed, renderer, thin, burn, progress, extra,
+               callback, resume, checkpoint_seconds) -> RunResult:
     chain = ChainRun(model, observations, out, steps=steps, seed=seed, renderer=renderer,
                      thin=thin, burn=burn, extra=extra, callback=callback, resume=resume,
                      checkpoint_seconds=checkpoint_seconds)
@@ -297,6 +308,44 @@ def chain_folder(out: Path, index: int) -> Path:
     return out / f"chain_{index}"
 
 
+def chain_seeds(seed: int, chains: int) -> list[np.random.SeedSequence]:
+    """Chain i's stream: the i-th of ``SeedSequence(seed).spawn(chains)``."""
+    return np.random.SeedSequence(seed).spawn(chains)
+
+
+def chain_extra(index: int, chains: int, seed: int) -> dict[str, Any]:
+    """What a chain of several records in its own run.json about the run it belongs to."""
+    return {"chain": index, "chains": chains, "master_seed": seed}
+
+
+def write_chains_record(model: Model, observations: Observations, out: Path, *, chains: int,
+                        steps: int, seed: int, thin: int, burn: int | None, resume: bool = False,
+                        lockstep: bool = False) -> dict[str, Any]:
+    """``out/run.json`` of a run of several chains, each in ``out/chain_<i>/``: what
+    ``combine_chains`` pools and ``sppl sample --resume`` reads. A resumed run's record must
+    name the same model and observations (checked before any chain starts)."""
+    out.mkdir(parents=True, exist_ok=True)
+    fingerprints = {"model_sha256": model_fingerprint(model),
+                    "observations_sha256": observations_fingerprint(observations)}
+    if resume and (out / "run.json").exists():
+        _check_same_inputs(out, fingerprints)
+    meta = {
+        "sppl_version": __version__,
+        "seed": seed,
+        "chains": chains,
+        "steps": steps,
+        "thin": thin,
+        "burn": burn,
+        "model": str(model.path) if model.path else None,
+        "observations": str(observations.root),
+        "chain_folders": [chain_folder(out, i).name for i in range(chains)],
+        **fingerprints,
+        **({"lockstep": True} if lockstep else {}),
+    }
+    (out / "run.json").write_text(json.dumps(meta, indent=2))
+    return meta
+
+
 def _chain_worker(source, path, observations, out, steps, seed, thin, burn, index, extra, done,
                   errors, resume=False, checkpoint_seconds=CHECKPOINT_SECONDS) -> None:
     """One chain in its own process (and so with its own GL context). SIGINT is left to the
@@ -374,32 +423,24 @@ def run_chains(
     ``resume=True`` each chain continues from its own checkpoint (see ``run_chain``). With
     ``lockstep=True`` the chains run in this process instead, advanced together
     (``sppl.lockstep``), and draw the same samples."""
-    import multiprocessing as mp
-
     if chains == 1:
         return run_chain(model, observations, out, steps=steps, seed=seed, thin=thin, burn=burn,
                          progress=progress, resume=resume, checkpoint_seconds=checkpoint_seconds,
                          extra={"lockstep": True} if lockstep else None)
     out.mkdir(parents=True, exist_ok=True)
-    fingerprints = {"model_sha256": model_fingerprint(model),
-                    "observations_sha256": observations_fingerprint(observations)}
-    if resume and (out / "run.json").exists():
-        _check_same_inputs(out, fingerprints)  # before any chain starts
-    seeds = np.random.SeedSequence(seed).spawn(chains)
-    meta = {
-        "sppl_version": __version__,
-        "seed": seed,
-        "chains": chains,
-        "steps": steps,
-        "thin": thin,
-        "burn": burn,
-        "model": str(model.path) if model.path else None,
-        "observations": str(observations.root),
-        "chain_folders": [chain_folder(out, i).name for i in range(chains)],
-        **fingerprints,
-        **({"lockstep": True} if lockstep else {}),
-    }
-    (out / "run.json").write_text(json.dumps(meta, indent=2))
+    with hold(out):  # one writer per run folder (sppl.lock), for the run's life
+        return _run_chains(model, observations, out, chains=chains, steps=steps, seed=seed,
+                           thin=thin, burn=burn, progress=progress, resume=resume,
+                           checkpoint_seconds=checkpoint_seconds, lockstep=lockstep)
+
+
+def _run_chains(model, observations, out, *, chains, steps, seed, thin, burn, progress, resume,
+                checkpoint_seconds, lockstep) -> RunResult:
+    import multiprocessing as mp
+
+    write_chains_record(model, observations, out, chains=chains, steps=steps, seed=seed,
+                        thin=thin, burn=burn, resume=resume, lockstep=lockstep)
+    seeds = chain_seeds(seed, chains)
     if lockstep:
         from .lockstep import run_lockstep
 
@@ -417,7 +458,7 @@ def run_chains(
             target=_chain_worker, name=f"sppl-chain-{i}",
             args=(model.source, str(model.path) if model.path else None, observations,
                   str(chain_folder(out, i)), steps, seeds[i], thin, burn, i,
-                  {"chain": i, "chains": chains, "master_seed": seed}, done, errors, resume,
+                  chain_extra(i, chains, seed), done, errors, resume,
                   checkpoint_seconds),
         )
         for i in range(chains)

@@ -48,6 +48,16 @@ class Term:
     likelihood: Likelihood
 
 
+def depth_mask(depth: np.ndarray, valid: np.ndarray | None = None) -> np.ndarray:
+    """Which depth pixels are measurements: those ``valid`` allows (all, if None) that are
+    finite and above zero. A depth of 0, below zero, NaN or inf is no measurement
+    (docs/observations.md), whether it came from a file or was put in an ``Observations`` by
+    hand; both scoring paths leave such pixels out (the fast path through this mask)."""
+    with np.errstate(invalid="ignore"):
+        mask = np.isfinite(depth) & (depth > 0)
+    return mask if valid is None else mask & np.asarray(valid, dtype=bool)
+
+
 class ReferenceScorer:
     """Turns a set of objects into per-term likelihood statistics, and those into a log density,
     by reading every render back and scoring it in numpy: the oracle of the fast path."""
@@ -69,6 +79,7 @@ class ReferenceScorer:
                                 i, kind, kind)
                     continue
                 if kind == "depth":
+                    valid = depth_mask(data, valid)
                     data = np.where(valid, data, 0.0).astype(np.float32)
                 terms.append(Term(i, kind, frame.camera, data, valid, self.likelihoods[kind]))
         if not terms:

@@ -7,6 +7,7 @@ and the statistical tests use to make observations whose truth is known.
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -14,27 +15,48 @@ from typing import Any
 import numpy as np
 
 from .errors import SpplError
-from .model import Model
+from .model import MAX_SCENE_OBJECTS, Model
 from .observations import CameraSpec, Frame
 from .trace import SceneObject, counts_allowed, make_object, scene_is_valid
 
 
-def sample_objects(model: Model, rng: np.random.Generator, max_tries: int = 10_000):
+PROGRESS_SECONDS = 5.0  # how often a long rejection sampling says it is still at work
+
+
+def sample_objects(model: Model, rng: np.random.Generator, max_tries: int = 10_000,
+                   progress=None):
     """Objects drawn from the prior: Poisson (or fixed) counts per class, parameters from each
     class's prior, and, under the no-overlap constraint or a bound on the total, whole scenes
-    redrawn until they keep it (rejection sampling, which is exactly the constrained prior)."""
-    for _ in range(max_tries):
-        objects = [
-            make_object(model, cls, cls.sample_prior(rng))
-            for cls in model.classes
-            for _ in range(cls.sample_count(rng))
-        ]
-        if counts_allowed(model, objects) and scene_is_valid(objects):
+    redrawn until they keep it (rejection sampling, which is exactly the constrained prior).
+    ``progress(tries, seconds)``, if given, is called every ``PROGRESS_SECONDS`` while it
+    draws, so that a long search is never silent."""
+    t0 = last = time.monotonic()
+    for tries in range(max_tries):
+        objects = _draw_scene(model, rng)
+        if objects is not None and counts_allowed(model, objects) and scene_is_valid(objects):
             return tuple(objects)
+        if progress is not None and time.monotonic() - last >= PROGRESS_SECONDS:
+            last = time.monotonic()
+            progress(tries + 1, last - t0)
+    bound = "" if model.max_objects is None else f" and at most {model.max_objects} objects"
     raise SpplError(
-        f"no scene without overlapping objects in {max_tries} draws from the prior; "
+        f"no scene without overlapping objects{bound} in {max_tries} draws from the prior; "
         "lower the classes' rates or widen the position priors"
     )
+
+
+def _draw_scene(model: Model, rng: np.random.Generator) -> list[SceneObject] | None:
+    """One draw of every class's objects, or None as soon as the total is past both the bound
+    on it and what a scene can hold (a scene the constraints reject anyway: not worth making
+    a million objects to find that out)."""
+    objects: list[SceneObject] = []
+    for cls in model.classes:
+        n = cls.sample_count(rng)
+        if len(objects) + n > MAX_SCENE_OBJECTS and model.max_objects is not None \
+                and len(objects) + n > model.max_objects:
+            return None
+        objects += [make_object(model, cls, cls.sample_prior(rng)) for _ in range(n)]
+    return objects
 
 
 def fixed_objects(model: Model, rng: np.random.Generator, max_tries: int = 10_000):

@@ -1078,14 +1078,17 @@ def verify_model(
     renderer=None,
     sampler_factory: Callable[..., Sampler] = Sampler,
     progress: Callable[[str], None] | None = None,
+    proposal_draws: int = 30,
 ) -> Report:
     """The check of the declarations, prior recovery, the move checks and (when the model has
-    sensors) a short Geweke test on one model, in one report whose verdict is corrected for
+    sensors) a short Geweke test and the checks of the proposals that look at the
+    observations (``sppl.proposal_checks``, ``proposal_draws`` draws per transform; 0 leaves
+    them out) on one model, in one report whose verdict is corrected for
     multiple comparisons. A check stopped by an error of the model (a dependent prior whose
     arguments break it for some values, say) gives a failing row with the error in the notes,
     and the others still run."""
     say = progress or (lambda message: None)
-    prior_seq, moves_seq, geweke_seq = _seq(seed).spawn(3)
+    prior_seq, moves_seq, geweke_seq, proposals_seq = _seq(seed).spawn(4)
     if model.sensors and renderer is None and run_geweke:
         from .render import Renderer
 
@@ -1106,6 +1109,16 @@ def verify_model(
             f"geweke: {geweke_chains} chains of {geweke_length} sweeps on {size}x{size} images ...",
             lambda: geweke(model, chains=geweke_chains, length=geweke_length, seed=geweke_seq,
                            size=size, renderer=renderer, sampler_factory=sampler_factory),
+        ))
+    if run_geweke and model.sensors and proposal_draws > 0:
+        from .proposal_checks import check_proposals
+
+        checks.append((
+            "proposals", "data-dependent proposals",
+            (f"proposals: the data-dependent proposals' samplers against their densities, "
+             f"{proposal_draws} draws each ..."),
+            lambda: check_proposals(model, seed=proposals_seq, draws=proposal_draws,
+                                    renderer=renderer, sampler_factory=sampler_factory),
         ))
     reports = []
     for check, what, message, run in checks:

@@ -89,9 +89,10 @@ def test_full_scenes_agree_with_the_reference(setting):
 
 
 def test_negative_observations_are_scored_on_both_paths(setting):
-    """Simulated observations go below zero (Gaussian noise around a dark colour or a near
-    surface), as the Geweke test's do: such a pixel is scored, not taken for a missing one.
-    Here every RGB value is shifted down by 0.7 and a block of depths below zero."""
+    """Simulated RGB goes below zero (Gaussian noise around a dark colour), as the Geweke
+    test's does: such a pixel is scored, not taken for a missing one. A depth below zero is no
+    measurement (docs/observations.md): both paths leave it out. Here every RGB value is
+    shifted down by 0.7 and a block of depths below zero."""
     model, renderer, obs, truth, noise = setting
     frames = []
     for frame in obs.frames:
@@ -108,9 +109,40 @@ def test_negative_observations_are_scored_on_both_paths(setting):
     sampler = Sampler(model, fast, np.random.default_rng(3))
     trace = sampler.make_trace(truth, noise)
     _assert_agree(trace.stats, ref.statistics(truth), ref, noise)
+    for f, frame in enumerate(frames):
+        if frame.rgb is not None:  # every RGB value is a term
+            assert trace.stats[(f, "image")][0] == frame.rgb.size
+        if frame.depth is not None:  # none below zero is
+            kept = frame.depth_valid & (frame.depth > 0)
+            assert (frame.depth[frame.depth_valid] <= 0).any()
+            assert trace.stats[(f, "depth")][0] == kept.sum()
+    rng = np.random.default_rng(4)
     for _ in range(40):  # moves scored incrementally from the current state
         trace = sampler.sweep(trace)
         _assert_agree(trace.stats, ref.statistics(trace.objects), ref, noise)
+
+
+def test_depth_below_zero_or_with_no_mask_is_the_same_on_both_paths(setting):
+    """An ``Observations`` made by hand, with depth below zero and no ``depth_valid``: the
+    pixels below zero, at zero or NaN are no measurement on both paths (the reference path
+    took a missing mask for every pixel at depth 0, the fast one for every pixel valid)."""
+    model, renderer, obs, truth, noise = setting
+    frames = []
+    for frame in obs.frames:
+        frame = copy.copy(frame)
+        if frame.depth is not None:
+            frame.depth = np.where(frame.depth_valid, frame.depth, np.nan).astype(np.float32)
+            frame.depth[:4] = -1.0
+            frame.depth[4:6] = 0.0
+            frame.depth_valid = None
+        frames.append(frame)
+    odd = Observations(obs.root, frames)
+    fast, ref = Scorer(model, odd, renderer), ReferenceScorer(model, odd, renderer)
+    stats = ref.statistics(truth)
+    _assert_agree(fast.statistics(truth), stats, ref, noise)
+    for f, frame in enumerate(frames):
+        if frame.depth is not None:
+            assert stats[(f, "depth")][0] == np.sum(np.nan_to_num(frame.depth, nan=-1) > 0)
 
 
 def test_a_batch_agrees_with_the_reference(setting):

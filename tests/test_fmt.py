@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 import pytest
 
 from sppl.cli import main
 from sppl.lang.pretty import expression, format_source
 from sppl.lang import parse
+
+ROOT = Path(__file__).resolve().parent.parent
 
 MESSY = """\
 let a=.5*-(2^3)^2 # a comment
@@ -69,3 +74,35 @@ def test_a_syntax_error_is_reported_and_nothing_written(tmp_path, capsys):
     assert main(["fmt", "--write", str(bad)]) == 1
     assert "bad.scn:1:11: the file ends too early; expected `)`" in capsys.readouterr().err
     assert bad.read_text() == "let a = (1\n"
+
+
+# -- what the project ships is in canonical form ----------------------------------------------
+
+SHIPPED = sorted(p for pattern in ("models/*.scn", "examples/**/*.scn")
+                 for p in ROOT.glob(pattern))
+DOC_PAGES = sorted([*ROOT.glob("docs/*.md"), ROOT / "README.md", *ROOT.glob("examples/**/*.md")])
+FENCE = re.compile(r"^```([^\n]*)\n(.*?)^```\s*$", re.MULTILINE | re.DOTALL)
+
+
+def doc_models() -> list[tuple[str, str]]:
+    """Every ```scn block of the docs, named by page and line."""
+    found = []
+    for page in DOC_PAGES:
+        text = page.read_text(encoding="utf-8")
+        for m in FENCE.finditer(text):
+            if m.group(1).split()[:1] == ["scn"]:
+                line = text[: m.start()].count("\n") + 1
+                found.append((f"{page.relative_to(ROOT)}:{line}", m.group(2)))
+    return found
+
+
+def test_every_shipped_model_is_in_canonical_form(capsys):
+    assert len(SHIPPED) >= 5  # models/ and examples/: what a user starts from
+    assert main(["fmt", "--check", *map(str, SHIPPED)]) == 0, capsys.readouterr().err
+
+
+@pytest.mark.parametrize("where, text", doc_models(), ids=[w for w, _ in doc_models()])
+def test_every_model_in_the_docs_is_in_canonical_form(where, text):
+    """The tutorial's cylinders.scn among them: a reader who runs `sppl fmt --check` on what
+    the docs show must not be told it is not canonical."""
+    assert format_source(text, where) == text

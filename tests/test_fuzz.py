@@ -5,6 +5,9 @@
   ``SpplError``.
 - Extreme but valid scenes (tiny and huge noise scales, objects far outside every camera, no
   objects, fifty objects) score finitely and the chain keeps running from them.
+- Random command lines of every subcommand (the folder's files in every place, numbers of every
+  kind, stray words) exit with 0, 1 or 2, never show a traceback, and when they fail leave the
+  folder as it was.
 
 The default command runs a hundred examples of each (twenty scenes), a few seconds in all
 (docs/errors.md gives the measured time); the ``slow`` marker runs the same properties with
@@ -18,6 +21,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import os
 import shutil
 from pathlib import Path
 
@@ -415,3 +419,113 @@ def test_the_named_extremes(world, n, far, size, sigma):
     assert len(objects) == n and all(math.isfinite(o.log_prior) for o in objects)
     noise = {kind: {p.name: sigma for p in sensor.noise} for kind, sensor in model.sensors.items()}
     run_from(make_sampler(n), objects, noise, sweeps=1)
+
+
+# -- command lines -------------------------------------------------------------------------------
+
+# What a hurried user types: the folder's own files and folders in every place, numbers of every
+# kind. Only values that keep a run to a few sweeps are offered (--steps is always given, no
+# second chain process), so that every example ends in a second or so.
+CLI_PATHS = ["model.scn", "huge.scn", "obs", "obs/transforms.json", "obs/images/a.png", "run",
+             "nowhere", "", ".", "notes.txt", "mine", "run/summary.json"]
+CLI_OUTS = ["new", "run", "obs", ".", "notes.txt", "model.scn", "new/deeper", "mine",
+            "run/chain_0", "obs/new"]
+CLI_NUMBERS = ["0", "-1", "1", "x", "1e3", "nan", "inf", "99999999999999999999999", "-0", ""]
+CLI_STEPS = ["0", "-2", "x", "1", "2", "nan"]
+CLI_OPTIONS = {
+    "sample": {"--obs": CLI_PATHS, "--out": CLI_OUTS, "--seed": CLI_NUMBERS,
+               "--thin": CLI_NUMBERS, "--burn": CLI_NUMBERS, "--chains": ["0", "-1", "1", "x"],
+               "--resume": CLI_PATHS, "--checkpoint-every": CLI_NUMBERS, "--force": None,
+               "--lockstep": None, "-q": None},
+    "simulate": {"--cameras": CLI_PATHS, "--out": CLI_OUTS, "--seed": CLI_NUMBERS,
+                 "--scene": [*CLI_PATHS, "obs/scene.json"], "--depth-format": ["npy", "png",
+                                                                               "exr"],
+                 "--force": None},
+    "check": {},
+    "fmt": {"--check": None, "--write": None},
+    "export": {"--out": ["p.nc", "nowhere/p.nc", "obs", "model.scn", "run/x.nc"]},
+    "verify": {"--seed": CLI_NUMBERS,
+               "--alpha": ["0", "1", "2", "nan", "x", "0.5"], "--size": ["0", "x", "3"],
+               "--geweke-chains": ["0", "1", "x"]},
+    "report": {"--truth": CLI_PATHS, "--no-truth": None, "--model": CLI_PATHS,
+               "--obs": CLI_PATHS},
+}
+
+
+@st.composite
+def command_lines(draw):
+    command = draw(st.sampled_from(sorted(CLI_OPTIONS)))
+    options = CLI_OPTIONS[command]
+    args = [command]
+    if command == "report":  # a real report takes seconds: only runs it cannot make one of
+        args.append(draw(st.sampled_from([p for p in CLI_PATHS if p != "run"])))
+    elif command != "sample" or draw(st.booleans()):
+        args.append(draw(st.sampled_from(CLI_PATHS)))
+    chosen = draw(st.lists(st.sampled_from(sorted(options)), max_size=5, unique=True)) \
+        if options else []
+    for name in chosen:
+        args.append(name)
+        if options[name] is not None:
+            args.append(draw(st.sampled_from(options[name])))
+    if command == "sample":
+        args += ["--steps", draw(st.sampled_from(CLI_STEPS)), "-q"]
+    if command == "verify":  # a short prior recovery only (the Geweke test renders)
+        args += ["--steps", draw(st.sampled_from(["0", "x", "-1", "99", "100"])), "--no-geweke"]
+    if draw(st.booleans()):  # and the odd stray word or option
+        args.insert(draw(st.integers(1, len(args))),
+                    draw(st.sampled_from(["--nonsense", "extra", "--", "-", "--steps"])))
+    return args
+
+
+@pytest.fixture(scope="module")
+def cli_template(tmp_path_factory, require_gl):
+    """A folder holding a good model, a model with a huge count, observations, a finished run
+    of four sweeps and some files of the user's own."""
+    from test_errors import MODEL, good
+
+    from sppl.cli import main
+
+    d = tmp_path_factory.mktemp("cli-template")
+    good(d)
+    (d / "huge.scn").write_text(MODEL.replace("count ~ poisson(1)", "count ~ poisson(1e6)", 1))
+    (d / "notes.txt").write_text("mine")
+    (d / "mine").mkdir()
+    (d / "mine" / "thesis.tex").write_text("mine")
+    old = Path.cwd()
+    os.chdir(d)
+    try:
+        assert main(["sample", "model.scn", "--obs", "obs", "--out", "run", "--steps", "4",
+                     "-q"]) == 0
+    finally:
+        os.chdir(old)
+    return d
+
+
+def check_command_line(args, template: Path, scratch: Path) -> None:
+    folder = scratch / "cli"
+    if folder.exists():
+        shutil.rmtree(folder)
+    shutil.copytree(template, folder, symlinks=True)
+    from test_misuse import run_main, tree
+
+    before = tree(folder)
+    code, err = run_main(args, folder)
+    assert code in (0, 1, 2), (args, code, err)
+    assert "Traceback" not in err, (args, err)
+    if code != 0:
+        assert err.strip(), args  # a failure says why
+        assert tree(folder) == before, (args, "a failed command changed the folder")
+
+
+@settings(QUICK, max_examples=40)
+@given(args=command_lines())
+def test_random_command_lines_end_in_a_message_and_change_nothing_when_they_fail(
+        cli_template, scratch, args):
+    check_command_line(args, cli_template, scratch)
+
+
+@pytest.mark.slow
+@settings(QUICK, max_examples=600)
+@given(args=command_lines())
+def test_command_lines_long(cli_template, scratch, args):
+    check_command_line(args, cli_template, scratch)

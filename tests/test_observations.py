@@ -441,3 +441,32 @@ def test_unsupported_depth_type(tmp_path):
     simple_folder(tmp_path, frame_extra={"depth_file_path": "depth/a.tif"})
     (tmp_path / "depth/a.tif").write_bytes(b"")
     assert "unsupported depth file type '.tif'" in error_of(load_observations, tmp_path)
+
+
+def test_depth_below_zero_is_missing_with_a_warning(tmp_path, caplog):
+    """docs/observations.md: 0, negative, NaN or inf in a file is no measurement; a negative
+    value is said, since it may be a map with an offset rather than a sensor's mark."""
+    import logging
+
+    from sppl.observations import load_observations
+
+    (tmp_path / "images").mkdir()
+    (tmp_path / "depth").mkdir()
+    Image.fromarray(np.full((6, 8, 3), 128, np.uint8)).save(tmp_path / "images" / "a.png")
+    depth = np.full((6, 8), 2.0, np.float32)
+    depth[0] = -1.0
+    depth[1, :3] = -0.25
+    np.save(tmp_path / "depth" / "a.npy", depth)
+    (tmp_path / "transforms.json").write_text(json.dumps({"fl_x": 9.0, "w": 8, "h": 6, "frames": [
+        {"file_path": "images/a.png", "depth_file_path": "depth/a.npy",
+         "transform_matrix": look_at([3.0, -2.0, 1.5], [0.0, 0.0, 0.5]).tolist()}]}))
+    with caplog.at_level(logging.WARNING, logger="sppl.observations"):
+        frame = load_observations(tmp_path).frames[0]
+    assert not frame.depth_valid[0].any() and not frame.depth_valid[1, :3].any()
+    assert frame.depth_valid.sum() == 48 - 11 and np.isnan(frame.depth[0]).all()
+    assert "11 depth pixels below zero (down to -1 m) taken as missing" in caplog.text
+    caplog.clear()
+    np.save(tmp_path / "depth" / "a.npy", np.full((6, 8), 2.0, np.float32))
+    with caplog.at_level(logging.WARNING, logger="sppl.observations"):
+        load_observations(tmp_path)
+    assert "below zero" not in caplog.text

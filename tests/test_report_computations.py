@@ -193,15 +193,55 @@ def test_acceptance_per_move_type_and_per_class():
     assert table["birth"] == {"sphere": (4, 1), "cube": (10, 3), "all": (14, 4)}
     assert table["noise"] == {"image": (20, 5), "all": (20, 5)}
     page = acceptance_html({"acceptance_by_class": MOVES})
-    header = re.findall(r"<th>([^<]+)</th>", page.split("</tr>")[0])
-    assert header == ["move", "cube", "image", "sphere", "all"]
+    # Two tables, the object moves by class and the noise moves by sensor: no column that is
+    # empty in every row (one table for both had a column per class and per sensor).
+    objects, noise = page.split("</table>")[:2]
+    assert re.findall(r"<th>([^<]+)</th>", objects.split("</tr>")[0]) == \
+        ["move \\ class", "cube", "sphere", "all"]
+    assert re.findall(r"<th>([^<]+)</th>", noise.split("</tr>")[0]) == \
+        ["move \\ sensor", "image", "all"]
     got = cells(page)
-    assert got["birth"] == ["0.300 <small>(3/10)</small>", "", "0.250 <small>(1/4)</small>",
+    assert got["birth"] == ["0.300 <small>(3/10)</small>", "0.250 <small>(1/4)</small>",
                             "0.286 <small>(4/14)</small>"]
-    assert got["death"] == ["–", "", "", "–"]  # never proposed: no rate
-    assert got["parameters"] == ["0.500 <small>(50/100)</small>", "", "",
+    assert got["death"] == ["–", "–", "–"]  # never proposed: no rate
+    assert got["parameters"] == ["0.500 <small>(50/100)</small>", "–",
                                  "0.500 <small>(50/100)</small>"]
-    assert got["noise"] == ["", "0.250 <small>(5/20)</small>", "", "0.250 <small>(5/20)</small>"]
+    assert got["noise"] == ["0.250 <small>(5/20)</small>", "0.250 <small>(5/20)</small>"]
+    assert all(all(c for c in row) for row in got.values())
+
+
+def test_the_summary_block_wraps_instead_of_running_off_the_side():
+    from sppl.report import CSS
+
+    pre = re.search(r"pre \{([^}]*)\}", CSS).group(1)
+    assert "white-space: pre-wrap" in pre and "overflow-x" not in pre
+
+
+def test_marginal_tick_labels_do_not_overlap(monkeypatch, tmp_path):
+    """A narrow panel over a narrow range (-0.24 to -0.16) had five labels run together."""
+    import sppl.report as report
+
+    figures = []
+    monkeypatch.setattr(report, "_save", lambda fig, folder, name: figures.append(fig) or name)
+    model = load_model(Path(__file__).resolve().parent.parent / "models" / "shapes.scn")
+    cube = {"class": "cube", "params": {"x": 0.29, "y": -0.216, "a": 0.261, "s": 0.699,
+                                        "c": "red"}}
+    # The spread of the report that showed it: y from -0.24 to -0.16, s from 0.675 to 0.705.
+    t = np.linspace(0.0, 1.0, 60)
+    samples = [{"step": i, "objects": [{"class": "cube", "params": {
+        "x": 0.28 + 0.06 * u, "y": -0.24 + 0.08 * u, "a": 0.05 + 0.2 * u, "s": 0.675 + 0.03 * u,
+        "c": "red"}}]} for i, u in enumerate(t)]
+    report.marginal_figures(model, [cube], samples, None, tmp_path)
+    (fig,) = figures
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    for ax in fig.axes:
+        boxes = [t.get_window_extent(renderer) for t in ax.get_xticklabels() if t.get_text()]
+        # At least a label's height of space between neighbours (the old ticks left 2 px).
+        assert all(b.x0 - a.x1 >= a.height for a, b in zip(boxes, boxes[1:])), \
+            [t.get_text() for t in ax.get_xticklabels()]
 
 
 # -- R-hat, bulk and tail ESS; the traces ---------------------------------------------------------

@@ -514,11 +514,13 @@ def test_adjoint_sweep_reverses_the_order_of_moves():
 def test_sppl_verify_shapes_quick(require_gl, root, capsys):
     """The shipped model, with short runs (the default length runs in the slow tests)."""
     code = cli.main(["verify", str(root / "models" / "shapes.scn"), "--steps", "3000",
-                     "--geweke-chains", "40", "--geweke-length", "10", "--seed", "1"])
+                     "--geweke-chains", "40", "--geweke-length", "10", "--seed", "1",
+                     "--proposal-draws", "15"])
     out = capsys.readouterr().out
     assert code == 0, out
     assert "quantity" in out and "p-value" in out and "PASS" in out
     assert "count of cube" in out and "geweke" in out
+    assert "birth of cube: E[r/q]" in out and "refit as sphere: x given the rest" in out
 
 
 def test_sppl_verify_names_the_failing_check_of_a_broken_likelihood(require_gl, capsys):

@@ -24,6 +24,8 @@ from ..domains import Finite, Interval, Periodic, Positive, Real
 from ..errors import ModelError, ModelErrors, Span, SpplError
 from ..geometry import Part
 from ..model import (
+    MAX_SCENE_OBJECTS,
+    SCENE_TAIL,
     InferenceSettings,
     Model,
     ObjectClass,
@@ -31,6 +33,7 @@ from ..model import (
     RenderSettings,
     Sensor,
     Values,
+    probability_of_more_objects,
 )
 from . import ast
 from .expressions import (
@@ -101,6 +104,7 @@ class _PendingClass(_Owner):
     rate: float | None = None
     count: int | None = None
     max_count: int | None = None
+    count_span: Span | None = None  # of its `count` line
     parts: list[tuple[Span, Callable[[Values], tuple[Part, ...]]]] = field(default_factory=list)
     span: Span | None = None  # of the class's definition
     program: ast.Program | None = None  # the file it is defined in
@@ -202,6 +206,34 @@ class _Compiler(ImportsMixin, ShapesMixin):
             )
         self._apply_steps()
         self._resolve_changes()
+        if self.main and not self.errors and not self.imported_errors:
+            self._check_scene_size()
+
+    def _check_scene_size(self) -> None:
+        """Refuse a prior that puts real mass on more objects than a run can handle: the
+        sampler would grind through such scenes, and `sppl simulate` would try to build one."""
+        if self.max_objects is not None and self.max_objects <= MAX_SCENE_OBJECTS:
+            return
+        classes = [c for c in self.classes.values() if c.rate is not None or c.count is not None]
+        compiled = [ObjectClass(c.name, float(c.count) if c.count is not None else c.rate, (),
+                                lambda values: (), count=c.count, max_count=c.max_count)
+                    for c in classes]
+        p = probability_of_more_objects(compiled, MAX_SCENE_OBJECTS)
+        if p <= SCENE_TAIL:
+            return
+        # Pointed at the count that contributes most (in this file, or its import).
+        worst = max(classes, key=lambda c: c.count if c.count is not None else c.rate)
+        span = (worst.count_span if worst.program is self.program and worst.count_span
+                else self.imported_at.get(id(worst), worst.span))
+        expected = sum(c.count if c.count is not None else c.rate for c in classes)
+        self.error(
+            f"the prior puts probability {p:.3g} on scenes of more than {MAX_SCENE_OBJECTS} "
+            f"objects (class `{worst.name}` alone expects {worst.count or worst.rate:g}, all "
+            f"classes {expected:g}), more than a run can sample",
+            span,
+            "lower the rate, or bound the count with `max_count = n` in the class or "
+            f"`constraint max_objects(n)` with n at most {MAX_SCENE_OBJECTS}",
+        )
 
     def compile(self) -> Model:
         self.check()
@@ -490,6 +522,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
                     )
                     continue
                 count = item
+                pending.count_span = item.span
                 pending.rate = self._count(item, local)
             elif isinstance(item, ast.Choice) and item.domain is None:
                 self.error(
@@ -516,6 +549,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
                 n = self._whole(item.value, f"`{key}`")
                 if key == "count":
                     count = item
+                    pending.count_span = item.span
                     pending.count = n
                     pending.rate = None if n is None else float(n)
                 else:
