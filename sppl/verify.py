@@ -56,6 +56,7 @@ from .domains import Finite, Integer
 from .errors import SpplError
 from .model import Model
 from .observations import CameraSpec, Frame, Observations
+from .region import bind as bind_region
 from .scoring import PriorScorer, Scorer
 from .simulate import sample_noise, sample_objects
 from .trace import Trace
@@ -462,9 +463,17 @@ def prior_recovery(
             if not draws:
                 rows.append(Row("prior", name, str(par.prior), "no draws", None, False))
                 continue
-            exact = _exact_test(draws, par, pick) if independent and par.prior_fn is None else None
+            restricted = cls.restriction is not None and par.name in cls.restriction.names
+            exact = (_exact_test(draws, par, pick)
+                     if independent and par.prior_fn is None and not restricted else None)
             if exact is not None:
                 expected, p = exact
+            elif restricted and independent:
+                # The prior restricted to the region, by rejection from the unrestricted one.
+                ref = list(cls.restriction.rejection_draws(reference_draws, pick)[
+                    :, cls.restriction.names.index(par.name)])
+                expected = f"{_describe(ref, par)} (rejection, n={len(ref)})"
+                p = float(stats.ks_2samp(draws, ref).pvalue)
             else:
                 expected = f"{_describe(ref, par)} ({where_ref}, n={len(ref)})"
                 if par.continuous:
@@ -515,7 +524,12 @@ def prior_declarations(model: Model, *, draws: int = 4000, seed=0, alpha: float 
                for kind, s in model.sensors.items()]
     for owner, parameters, draw in owners:
         samples = [draw() for _ in range(draws)]
+        restricted = next((c.restriction for c in model.classes if c.name == owner), None)
+        if restricted is not None:
+            rows += _restriction_rows(owner, restricted, samples, rng)
         for par in parameters:
+            if restricted is not None and par.name in restricted.names:
+                continue  # its marginal is the restricted prior's: _restriction_rows
             name = f"{owner}.{par.name}: draws match density"
             # Where the density is zero at a draw, the prior the sampler targets (truncated
             # to the domain, renormalised per object) is not the one that births draw from.
@@ -549,6 +563,25 @@ def prior_declarations(model: Model, *, draws: int = 4000, seed=0, alpha: float 
             rows.append(Row("prior", name, "F(draw) uniform: mean 0.500, sd 0.289",
                             f"{_mean_sd(u)} (n={len(u)})", p))
     return Report(rows, alpha)
+
+
+def _restriction_rows(owner: str, r, samples, rng) -> list[Row]:
+    """A class's position draws, restricted to the model's region, against rejection sampling
+    from the unrestricted priors (KS on each coordinate), and the normaliser Z against the
+    share of those draws that land inside (binomial)."""
+    ref = r.rejection_draws(len(samples), rng)
+    rows = []
+    for i, name in enumerate(r.names):
+        draws = [v[name] for v in samples]
+        p = float(stats.ks_2samp(draws, ref[:, i]).pvalue)
+        rows.append(Row("prior", f"{owner}.{name}: draws match the region's prior",
+                        f"rejection: {_mean_sd(ref[:, i])}", _mean_sd(draws), p))
+    z, tries = math.exp(r.log_mass), 2 * len(samples)
+    inside = r.inside(tries, rng)
+    p = float(stats.binomtest(inside, tries, z).pvalue)
+    rows.append(Row("prior", f"{owner}: the region's normaliser", f"Z = {z:.4f}",
+                    f"{inside}/{tries} = {inside / tries:.4f} inside", p))
+    return rows
 
 
 def _one(values, rng):
@@ -1086,6 +1119,8 @@ def verify_model(
     and the others still run."""
     say = progress or (lambda message: None)
     prior_seq, moves_seq, geweke_seq = _seq(seed).spawn(3)
+    # `region cameras` is checked as the ground the verify cameras see.
+    model = bind_region(model, [spec.camera for spec in verify_cameras(model, size)])
     if model.sensors and renderer is None and run_geweke:
         from .render import Renderer
 
