@@ -10,10 +10,12 @@ A scene holds a varying number of objects, so objects are stored in ``slot``s pa
 largest number any stored sample has: ``exists`` says which slots hold an object, the class is
 ``object_class`` ("" in an empty slot), and each parameter name of any class is one variable
 (NaN, or "" for a categorical one, where the slot is empty or the object's class has no such
-parameter). Slots are ordered by class (the model's order), then x, then y. The order of
+parameter). Slots are ordered by class (the model's order), then x, then y. Where the samples
+mark which objects some camera sees (``sppl.seen``), ``seen`` is that mark per slot, and
+``n_seen`` and ``count_seen`` (per class) are the numbers seen. The order of
 objects means nothing (the scene is a set; slot 0 in one draw need not be the same object as
 slot 0 in the next), so R-hat and ESS are computed only for *label-invariant* quantities: the
-number of objects, the number of each class, the log joint, the log likelihood and the noise
+number of objects, the number of each class, the number seen, the log joint, the log likelihood and the noise
 scales.
 """
 
@@ -168,6 +170,11 @@ def posterior_arrays(run: RunFiles, burn: int | None = None) -> Posterior:
         for name, cat in params.items()
     }
     noise = {n: np.full(shape, np.nan) for n in noise_names}
+    # Which objects some camera sees (sppl.seen), where every sample marks them.
+    marked = all("seen" in o for k in per_chain for s in k for o in s["objects"])
+    seen = np.zeros(slots, dtype=bool)
+    n_seen = np.zeros(shape, dtype=np.int64)
+    count_seen = np.zeros((*shape, len(classes)), dtype=np.int64)
     lp, loglik, step = np.zeros(shape), np.zeros(shape), np.zeros(shape, dtype=np.int64)
     key = _slot_key(class_index)
     for c, k in enumerate(per_chain):
@@ -184,18 +191,27 @@ def posterior_arrays(run: RunFiles, burn: int | None = None) -> Posterior:
                 object_class[c, d, j] = o["class"]
                 if o["class"] in class_index:
                     count[c, d, class_index[o["class"]]] += 1
+                if marked and o["seen"]:
+                    seen[c, d, j] = True
+                    n_seen[c, d] += 1
+                    if o["class"] in class_index:
+                        count_seen[c, d, class_index[o["class"]]] += 1
                 for name, v in o["params"].items():
                     values[name][c, d, j] = v
     for name, cat in params.items():
         if cat:
             width = max([1, *(len(v) for v in values[name].ravel())])
             values[name] = values[name].astype(f"<U{width}")
-    reserved = {"n_objects", "count", "exists", "object_class", *noise_names}
+    reserved = {"n_objects", "count", "exists", "object_class", "seen", "n_seen", "count_seen",
+                *noise_names}
     variables: dict[str, np.ndarray] = {
         "n_objects": n_objects, "count": count, **noise, "exists": exists,
         "object_class": object_class,
     }
     dims = {"count": ["class"], "exists": ["slot"], "object_class": ["slot"]}
+    if marked:
+        variables.update(n_seen=n_seen, count_seen=count_seen, seen=seen)
+        dims.update(count_seen=["class"], seen=["slot"])
     for name, arr in values.items():
         var = f"param_{name}" if name in reserved else name
         variables[var] = arr
@@ -279,6 +295,8 @@ def invariant_quantities(post: Posterior) -> dict[str, np.ndarray]:
     out = {"n_objects": post.variables["n_objects"].astype(float)}
     for i, c in enumerate(post.class_names):
         out[f"count[{c}]"] = post.variables["count"][..., i].astype(float)
+    if "n_seen" in post.variables:
+        out["n_seen"] = post.variables["n_seen"].astype(float)
     out["log joint"] = post.stats["lp"]
     out["log likelihood"] = post.stats["log_likelihood"]
     for n in post.noise_names:
