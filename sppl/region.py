@@ -59,6 +59,9 @@ class Region:
     is_box: bool = False
     description: str = ""
 
+    def __post_init__(self) -> None:
+        shapely.prepare(self.geometry)  # point tests against it run on every proposal
+
     @property
     def bounds(self) -> tuple[float, float, float, float]:
         return tuple(float(v) for v in self.geometry.bounds)

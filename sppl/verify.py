@@ -374,6 +374,7 @@ def prior_recovery(
     counts, or a prior that depends on other parameters, with ``reference_draws`` independent
     scenes drawn from the prior by ``sample_objects`` (rejection sampling where constrained).
     """
+    model = for_checks(model)
     m = with_jumps(model, p_jump)
     chain_seq, ref_seq, pick_seq = _seq(seed).spawn(3)
     rng = np.random.default_rng(chain_seq)
@@ -517,6 +518,7 @@ def prior_declarations(model: Model, *, draws: int = 4000, seed=0, alpha: float 
     other values), for uniformity (KS; randomised between F(x - 1) and F(x) for integers),
     and each categorical parameter's draws against its probabilities (chi-square). Priors
     without a ``cdf`` are left out."""
+    model = for_checks(model)
     rng = np.random.default_rng(_seq(seed))
     rows = []
     owners = [(cls.name, cls.parameters, lambda c=cls: c.sample_prior(rng)) for cls in model.classes]
@@ -621,6 +623,12 @@ def _exact_test(draws, par, rng) -> tuple[str, float] | None:
 
 # ---------------------------------------------------------------------------------------------
 # Observations for the checks that need a likelihood
+
+
+def for_checks(model: Model) -> Model:
+    """``model`` with a ``region cameras`` taken as the ground the verify cameras see (sized
+    by the unrestricted prior): the checks need a region before any observation is made."""
+    return bind_region(model, [spec.camera for spec in verify_cameras(model)])
 
 
 def verify_cameras(model: Model, size: int = 8, seed: int = 0) -> list[CameraSpec]:
@@ -774,6 +782,7 @@ def geweke(
     tests (Kolmogorov-Smirnov, chi-square for discrete quantities), whose false-alarm rate is
     then exact. A wrong move makes the chains drift from the prior, furthest at their end.
     """
+    model = for_checks(model)
     m = with_jumps(model, p_jump)
     if not m.sensors:
         return Report([], alpha, ["geweke: the model has no sensors, so there is nothing to test."])
@@ -923,6 +932,7 @@ def move_checks(
     look at what a state leaves unexplained) are among those checked; without, against no
     observations. The change-of-class pairings are checked too (``change_declarations``).
     """
+    model = for_checks(model)
     seq = _seq(seed)
     rng = np.random.default_rng(seq)
     if model.sensors and observe:
@@ -1054,6 +1064,7 @@ def sbc(
     those before, ``thin`` sweeps apart. That chain is stationary, so the truth's rank is
     exactly uniform however short the chain; a wrong move breaks the uniformity.
     """
+    model = for_checks(model)
     m = with_jumps(model, p_jump)
     if renderer is None:
         from .render import Renderer
@@ -1119,8 +1130,7 @@ def verify_model(
     and the others still run."""
     say = progress or (lambda message: None)
     prior_seq, moves_seq, geweke_seq = _seq(seed).spawn(3)
-    # `region cameras` is checked as the ground the verify cameras see.
-    model = bind_region(model, [spec.camera for spec in verify_cameras(model, size)])
+    model = for_checks(model)  # `region cameras`: the ground the verify cameras see
     if model.sensors and renderer is None and run_geweke:
         from .render import Renderer
 

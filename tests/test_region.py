@@ -292,3 +292,14 @@ def test_sppl_verify_with_a_camera_region(require_gl, tmp_path, capsys):
     out = capsys.readouterr().out
     assert code == 0, out
     assert "the region's normaliser" in out
+
+
+def test_sppl_sample_names_an_unknown_camera_in_one_line(require_gl, tmp_path, capsys, root):
+    path = tmp_path / "named.scn"
+    path.write_text(FIXTURE.read_text() + "region cameras(rgb_front, top)\n")
+    code = cli.main(["sample", str(path), "--obs", str(root / "examples" / "three_shapes" / "obs"),
+                     "--out", str(tmp_path / "run"), "--steps", "5"])
+    err = capsys.readouterr().err
+    assert code != 0 and "Traceback" not in err
+    assert "named.scn:" in err and "unknown camera 'top'" in err
+    assert "'rgb_front', 'depth_side'" in err
