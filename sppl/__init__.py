@@ -20,9 +20,11 @@ from .likelihoods import Gaussian, Likelihood, available_likelihoods, register_l
 from .model import Model
 from .observations import Observations, load_cameras, load_observations, write_observations
 from .posterior import load_run, open_posterior, write_posterior
+from .region import RegionError, bind_region
 from .render import Renderer, raycast
 from .run import run_chain, run_chains
 from .scoring import ReferenceScorer, Scorer
+from .seen import SeenPass, seen_reference
 from .simulate import render_observations, sample_noise, sample_objects
 from .verify import verify_model
 
@@ -34,13 +36,16 @@ __all__ = [
     "ObservationError",
     "Observations",
     "ReferenceScorer",
+    "RegionError",
     "RenderError",
     "Renderer",
     "RunError",
     "Sampler",
     "Scorer",
+    "SeenPass",
     "SpplError",
     "available_likelihoods",
+    "bind_region",
     "compare_scenes",
     "compile_model",
     "load_cameras",
@@ -56,6 +61,7 @@ __all__ = [
     "run_chains",
     "sample_noise",
     "sample_objects",
+    "seen_reference",
     "verify_model",
     "write_observations",
     "write_posterior",

@@ -21,7 +21,7 @@ import numpy as np
 from . import fit, merge, moves, tries
 from .birth import BirthProposal
 from .model import Model
-from .region import bind as bind_region
+from .region import bind_region
 from .trace import Trace, noise_log_prior, objects_log_prior, overlaps_any
 from .warmup import Warmup
 

@@ -23,6 +23,7 @@ sets the acceptance rate).
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -337,7 +338,7 @@ def _polygon_mass(region: Region, x_prior, y_prior, bx) -> tuple[float, float]:
     p, q = _edges(region.geometry)
     breaks = np.unique(np.concatenate([p[:, 0], q[:, 0], [bx[0], bx[1]]]))
     breaks = breaks[(breaks >= bx[0]) & (breaks <= bx[1])]
-    slabs = list(zip(breaks[:-1], breaks[1:]))
+    slabs = list(itertools.pairwise(breaks))
 
     def estimate(n: int) -> float:
         t, w = np.polynomial.legendre.leggauss(n)
@@ -372,7 +373,7 @@ class CamerasRegion:
     where: str = ""  # file:line:column of the statement, for errors
 
 
-def bind(model, cameras: Sequence | None):
+def bind_region(model, cameras: Sequence | None):
     """``model`` with a ``region cameras`` resolved against ``cameras`` (its classes' position
     priors restricted to their footprints); any other model as it is."""
     spec = model.region
@@ -392,3 +393,14 @@ def bind(model, cameras: Sequence | None):
     except RegionError as error:
         raise RegionError(f"{spec.where}: {error}" if spec.where else str(error)) from None
     return dataclasses.replace(model, classes=classes, region=region)
+
+
+def region_text(model) -> str:
+    """What a model's region is, in a line (``sppl check``)."""
+    spec = model.region
+    if isinstance(spec, CamerasRegion):
+        which = ", ".join(spec.names) if spec.names else "every camera"
+        return f"the ground the cameras see ({which}), known once the observations are"
+    masses = ", ".join(f"{c.name} {math.exp(c.restriction.log_mass):.4g}"
+                       for c in model.classes if c.restriction is not None)
+    return f"{spec.description}; prior mass inside: {masses}"

@@ -29,8 +29,8 @@ from .errors import RunError, SpplError
 from .model import Model
 from .observations import Observations
 from .samples import SampleWriter, format_summary, read_samples, summarise, truncate_samples
-from .seen import SeenCache
 from .scoring import Scorer
+from .seen import SeenCache
 from .warmup import warmup_sweeps
 
 

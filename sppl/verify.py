@@ -56,7 +56,7 @@ from .domains import Finite, Integer
 from .errors import SpplError
 from .model import Model
 from .observations import CameraSpec, Frame, Observations
-from .region import bind as bind_region
+from .region import bind_region
 from .scoring import PriorScorer, Scorer
 from .simulate import sample_noise, sample_objects
 from .trace import Trace

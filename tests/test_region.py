@@ -22,7 +22,15 @@ from sppl.chain import Sampler
 from sppl.distributions import Normal, Uniform
 from sppl.errors import ModelErrors
 from sppl.lang.compile import compile_model
-from sppl.region import RegionError, bind, box, cameras_region, camera_footprint, polygon, restrict
+from sppl.region import (
+    RegionError,
+    bind_region,
+    box,
+    camera_footprint,
+    cameras_region,
+    polygon,
+    restrict,
+)
 from sppl.scoring import PriorScorer
 from sppl.trace import make_object
 
@@ -156,7 +164,7 @@ def test_a_camera_region_names_known_cameras():
     model = model_with('region cameras(front, "side")')
     with pytest.raises(RegionError, match=r"regions\.scn:\d+:1: region cameras: unknown "
                                           r"camera 'side'; the observations have 'front'"):
-        bind(model, [camera()])
+        bind_region(model, [camera()])
     with pytest.raises(RegionError, match="no cameras to take the region from"):
         Sampler(model_with("region cameras"), PriorScorer(), np.random.default_rng(0))
     away = Camera("up", 8, 8, 8.0, 8.0, 4, 4, look_at((0, 0, 2), (0, 0.01, 5)), depth_max=8.0)
@@ -255,7 +263,7 @@ def test_a_change_between_classes_weighs_their_normalisers():
     because the classes' position priors do, and the sampler's ratio must count them."""
     model = model_with("region box(-1, -2, 3, 1)", jumps=LIGHT)
     sampler = Sampler(model, PriorScorer(), np.random.default_rng(0))
-    ball, block = model.classes
+    ball, _ = model.classes
     values = {"x": 0.4, "y": -0.3, "r": 0.3, "c": "red"}
     trace = sampler.initial_trace((make_object(model, ball, values),))
     for _ in range(50):
@@ -303,3 +311,11 @@ def test_sppl_sample_names_an_unknown_camera_in_one_line(require_gl, tmp_path, c
     assert code != 0 and "Traceback" not in err
     assert "named.scn:" in err and "unknown camera 'top'" in err
     assert "'rgb_front', 'depth_side'" in err
+
+
+def test_sppl_check_shows_the_region(tmp_path, capsys):
+    path = tmp_path / "boxed.scn"
+    path.write_text(model_with("region box(-1, -2, 3, 1)").source)
+    assert cli.main(["check", str(path)]) == 0
+    assert "region: box(-1, -2, 3, 1); prior mass inside: ball 0.4382, block 0.3328" in (
+        capsys.readouterr().out)
