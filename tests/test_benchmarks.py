@@ -28,3 +28,17 @@ def test_evaluations_prints_both_tables(root, require_gl):
 def test_versions_compares_two_checkouts(root, require_gl):
     out = bench(root, "versions.py", root, root, "--rounds", "1")
     assert "| whole hypothesis |" in out and "| single-object move |" in out
+
+
+def test_testbed_benchmark_report_and_figure(root, require_gl, tmp_path):
+    """benchmarks/testbed.py on the empty-floor scene, a few sweeps (no objects to find: both
+    renders are recovered at the first check), its --report of the run, and the figure."""
+    run = tmp_path / "run.json"
+    out = bench(root, "testbed.py", "--scenes", "blocks_empty", "--steps", "100", "--json", run)
+    assert "| cycles | 1/1 |" in out and "| sppl | 1/1 |" in out
+    rows = __import__("json").loads(run.read_text())
+    assert [(r["renderer"], r["first_right_step"]) for r in rows] == [("cycles", 100), ("sppl", 100)]
+    assert "| cycles | 2/2 |" in bench(root, "testbed.py", "--report", run, run)
+    figure = tmp_path / "figure.png"
+    bench(root, "testbed/figure.py", run, "--scenes", "blocks_empty", "--out", figure)
+    assert figure.stat().st_size > 0

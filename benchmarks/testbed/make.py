@@ -1,0 +1,180 @@
+"""Make the test bed: scenes of the shipped models rendered by Blender's Cycles, and the same
+scenes rendered by sppl, each as an observation folder with its true scene.
+
+    pip install '.[cycles]'
+    python benchmarks/testbed/make.py              # every scene (about a minute)
+    python benchmarks/testbed/make.py --only blocks_shadows
+
+Scenes: for each model, a few drawn from its prior with a fixed seed, with 1 to 5 objects
+whose centres are all inside both cameras' images (the prior conditioned on the count and
+on the objects being in view: ``drawn_scenes``), and a few written by hand for what the prior
+rarely draws: an empty floor, metal objects, long cast shadows (a low sun), and an object
+partly hidden behind another from the RGB camera. Each scene NAME gets
+
+    benchmarks/testbed/NAME/cycles/   rendered by render_cycles.py (Cycles), with scene.json
+    benchmarks/testbed/NAME/sppl/     rendered by `sppl simulate --scene` (sppl's own renderer)
+
+with the cameras of ``examples/models/MODEL/cameras.json`` (one RGB and one depth camera,
+96x96) and the same sensor noise (Gaussian, 0.02 in RGB and 0.02 m in depth). The list of
+scenes is written to ``benchmarks/testbed/scenes.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(HERE))
+
+from sppl.cli import main as sppl  # noqa: E402
+from sppl.lang import load_model  # noqa: E402
+from sppl.observations import load_cameras  # noqa: E402
+from sppl.trace import counts_allowed, make_object, scene_is_valid  # noqa: E402
+
+SEED = 2024
+MAX_OBJECTS = 5
+MARGIN = 6  # pixels: an object's centre at least this far inside every image
+# How many scenes each model draws from its prior.
+DRAWN = {"blocks": 5, "shapes": 2}
+SIGMA = 0.02
+
+# What the prior rarely draws, by hand. "renderer": {"light": ...} moves Cycles' sun.
+LOW_SUN = [-0.2, 1.0, 0.55]  # from the far side, 29 degrees up: shadows fall towards the cameras
+CASES = {
+    "blocks": {
+        "empty": {"objects": []},
+        "metal": {"objects": [
+            {"class": "sphere", "params": {"x": 0.6, "y": -0.6, "size": "large",
+                                           "material": "metal", "c": "gray"}},
+            {"class": "cylinder", "params": {"x": -0.7, "y": 0.2, "size": "large",
+                                             "material": "metal", "c": "blue"}},
+            {"class": "cube", "params": {"x": 0.5, "y": 0.9, "a": 0.4, "size": "small",
+                                         "material": "metal", "c": "yellow"}}]},
+        "shadows": {"renderer": {"light": LOW_SUN}, "objects": [
+            {"class": "cube", "params": {"x": 0.2, "y": -0.3, "a": 0.2, "size": "large",
+                                         "material": "rubber", "c": "green"}},
+            {"class": "cylinder", "params": {"x": -0.9, "y": -0.9, "size": "small",
+                                             "material": "rubber", "c": "purple"}}]},
+        # From the RGB camera at (3, -2.6) the small sphere is partly behind the large cube.
+        "occlusion": {"objects": [
+            {"class": "cube", "params": {"x": 0.9, "y": -0.7, "a": 0.0, "size": "large",
+                                         "material": "rubber", "c": "brown"}},
+            {"class": "sphere", "params": {"x": 0.4, "y": 0.55, "size": "small",
+                                           "material": "rubber", "c": "cyan"}}]},
+    },
+    # shapes.scn has no ground (nothing to cast a shadow on): a low sun only shades differently.
+    "shapes": {
+        "lowsun": {"renderer": {"light": LOW_SUN}, "objects": [
+            {"class": "cone", "params": {"x": 0.3, "y": -0.2, "r": 0.4, "h": 0.9, "c": "red"}},
+            {"class": "sphere", "params": {"x": -0.9, "y": 0.6, "r": 0.3, "c": "blue"}}]},
+        "occlusion": {"objects": [
+            {"class": "cube", "params": {"x": 0.9, "y": -0.7, "a": 0.1, "s": 0.8, "c": "green"}},
+            {"class": "sphere", "params": {"x": 0.0, "y": 0.2, "r": 0.25, "c": "red"}}]},
+    },
+}
+
+
+def cameras_of(model_name: str) -> Path:
+    return ROOT / "examples" / "models" / model_name / "cameras.json"
+
+
+def in_view(objects, cameras) -> bool:
+    """Every object's centre (its parts' mean, half way up) inside every camera's image."""
+    for o in objects:
+        centre = np.mean([p.matrix[:3] @ (0.0, 0.0, 0.5, 1.0) for p in o.parts], axis=0)
+        for spec in cameras:
+            cam = spec.camera
+            (u, v), depth = (a[0] for a in cam.project(centre))
+            if not (depth > 0 and MARGIN <= u <= cam.width - MARGIN
+                    and MARGIN <= v <= cam.height - MARGIN):
+                return False
+    return True
+
+
+def drawn_scenes(model_name: str, n: int, seed: int) -> dict[str, dict]:
+    """``n`` scenes from the model's prior conditioned on their objects being in view, with
+    1, 2, ... objects (the count is set, not drawn: the prior conditioned on view holds
+    mostly empty scenes, and the hand-written cases have an empty one). Given the count,
+    each object's class is drawn by the classes' rates and its parameters from its prior
+    until it is in view, and whole scenes are redrawn until no two objects overlap: the
+    prior conditioned on the count and on every object in view."""
+    model = load_model(ROOT / "models" / f"{model_name}.scn")
+    cameras = load_cameras(cameras_of(model_name))
+    rng = np.random.default_rng(np.random.SeedSequence([seed, sorted(DRAWN).index(model_name)]))
+    rates = np.array([c.rate for c in model.classes], dtype=float)
+    scenes = {}
+    while len(scenes) < n:
+        objects = []
+        for _ in range(1 + len(scenes) % MAX_OBJECTS):
+            cls = model.classes[rng.choice(len(rates), p=rates / rates.sum())]
+            while not in_view([o := make_object(model, cls, cls.sample_prior(rng))], cameras):
+                pass
+            objects.append(o)
+        if counts_allowed(model, objects) and scene_is_valid(objects):
+            scenes[f"prior{len(scenes)}"] = {"objects": [o.as_dict() for o in objects]}
+    return scenes
+
+
+def all_scenes(seed: int = SEED) -> list[dict]:
+    index = []
+    for model_name in sorted(DRAWN):
+        cases = {**drawn_scenes(model_name, DRAWN[model_name], seed), **CASES[model_name]}
+        for case, scene in cases.items():
+            index.append({"name": f"{model_name}_{case}", "model": f"models/{model_name}.scn",
+                          "cameras": str(cameras_of(model_name).relative_to(ROOT)),
+                          "scene": {**scene, "noise": {"image": {"sigma": SIGMA},
+                                                       "depth": {"sigma": SIGMA}}}})
+    return index
+
+
+def make(entry: dict, out: Path, seed: int) -> None:
+    from render_cycles import render_folder
+
+    folder = out / entry["name"]
+    if folder.exists():
+        shutil.rmtree(folder)
+    with tempfile.TemporaryDirectory() as tmp:
+        scene_file = Path(tmp) / "scene.json"
+        scene_file.write_text(json.dumps(entry["scene"]))
+        log = io.StringIO()
+        # Blender prints every sample's progress on the C side: it goes to the terminal.
+        render_folder(ROOT / entry["model"], ROOT / entry["cameras"], scene_file,
+                      folder / "cycles", seed=seed, sigma=SIGMA)
+        with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
+            code = sppl(["simulate", str(ROOT / entry["model"]), "--cameras",
+                         str(ROOT / entry["cameras"]), "--scene", str(scene_file), "--out",
+                         str(folder / "sppl"), "--seed", str(seed), "--depth-format", "png",
+                         "--force"])
+        if code:
+            raise SystemExit(f"sppl simulate failed for {entry['name']}:\n{log.getvalue()}")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", type=Path, default=HERE)
+    p.add_argument("--only", nargs="+", help="scene names (default: every one)")
+    p.add_argument("--seed", type=int, default=SEED)
+    args = p.parse_args(argv)
+    index = all_scenes(args.seed)
+    (args.out / "scenes.json").write_text(json.dumps(index, indent=2) + "\n")
+    for i, entry in enumerate(index):
+        if args.only and entry["name"] not in args.only:
+            continue
+        make(entry, args.out, args.seed + i)
+        print(f"{entry['name']}: {len(entry['scene']['objects'])} objects", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
