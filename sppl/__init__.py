@@ -23,9 +23,11 @@ from .model import Model
 from .observations import Observations, load_cameras, load_observations, write_observations
 from .posterior import load_run, open_posterior, write_posterior
 from .proposal_checks import check_proposals, joint_check
+from .region import RegionError, bind_region
 from .render import Renderer, raycast
 from .run import run_chain, run_chains
 from .scoring import ReferenceScorer, Scorer
+from .seen import SeenPass, seen_reference
 from .simulate import render_observations, sample_noise, sample_objects
 from .verify import verify_model
 
@@ -39,14 +41,17 @@ __all__ = [
     "Observations",
     "RayExecutor",
     "ReferenceScorer",
+    "RegionError",
     "RenderError",
     "Renderer",
     "RunError",
     "Sampler",
     "Scorer",
+    "SeenPass",
     "SpplError",
     "available_likelihoods",
     "check_proposals",
+    "bind_region",
     "compare_scenes",
     "compile_model",
     "find_scenes",
@@ -65,6 +70,7 @@ __all__ = [
     "run_dataset",
     "sample_noise",
     "sample_objects",
+    "seen_reference",
     "verify_model",
     "write_observations",
     "write_posterior",

@@ -21,6 +21,7 @@ import numpy as np
 from . import fit, merge, moves, tries
 from .birth import BirthProposal
 from .model import Model
+from .region import bind_region
 from .trace import Trace, noise_log_prior, objects_log_prior, overlaps_any
 from .warmup import Warmup
 
@@ -100,7 +101,8 @@ class Sampler:
     """Advances one chain. ``scorer`` renders and scores; ``rng`` is the chain's only randomness."""
 
     def __init__(self, model: Model, scorer, rng: np.random.Generator) -> None:
-        self.model = model
+        # A `region cameras` becomes the ground the scorer's cameras see (sppl.region).
+        self.model = model = bind_region(model, getattr(scorer, "cameras", {}).values())
         self.scorer = scorer
         self.rng = rng
         self.stats = MoveStats()

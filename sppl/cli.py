@@ -360,6 +360,7 @@ def _check_seed(seed: int | None) -> None:
 
 def cmd_check(args) -> int:
     from .lang import load_model
+    from .region import region_text
 
     model = load_model(args.model)
     print(f"{args.model}: {len(model.classes)} classes, sensors: {', '.join(model.sensors) or 'none'}")
@@ -379,6 +380,8 @@ def cmd_check(args) -> int:
         print("constraint: no two footprints overlap")
     if model.max_objects is not None:
         print(f"constraint: at most {model.max_objects} objects in all")
+    if model.region is not None:
+        print(f"region: {region_text(model)}")
     if model.static_parts:
         print(f"static scene: {len(model.static_parts)} fixed parts")
     return 0

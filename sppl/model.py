@@ -137,6 +137,8 @@ class ObjectClass:
     # Of those, the ones carried scaled: {other class: {parameter here: factor}}, where the
     # value here is the factor times the value there (sppl.moves.carried_scales).
     correspondence_scales: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+    # The model's region restricting the position prior (``sppl.region.Restriction``), if any.
+    restriction: Any = None
 
     def parameter(self, name: str) -> Parameter | None:
         for p in self.parameters:
@@ -154,10 +156,16 @@ class ObjectClass:
         """Values drawn from the prior; those in ``given`` are kept and the others drawn
         conditionally on them. ``parameters`` is in dependency order, so each prior's
         arguments are known when it is drawn."""
-        values = dict(given or {})
+        given = given or {}
+        values = dict(given)
+        r = self.restriction
         for p in self.parameters:
-            if p.name not in values:
+            if p.name not in values and (r is None or p.name not in r.names):
                 values[p.name] = p.sample(rng, values)
+        if r is not None:
+            # Nothing depends on the position (``position``), so it may come last: a draw of
+            # the prior restricted to the region, given a coordinate ``given`` fixes.
+            r.sample(rng, values, given)
         return values
 
     def log_prior(self, values: Values, only: Collection[str] | None = None) -> float:
@@ -169,7 +177,9 @@ class ObjectClass:
                 continue
             total += p.log_prob(values[p.name], values)
             if total == -math.inf:
-                break  # a dependent prior must not see values outside their domains
+                return total  # a dependent prior must not see values outside their domains
+        if self.restriction is not None:
+            total += self.restriction.log_correction(values, only)
         return total
 
     def sample_count(self, rng: np.random.Generator) -> int:
@@ -251,6 +261,9 @@ class Model:
     no_overlap: bool = False
     # An upper bound on the total number of objects in a scene, if any.
     max_objects: int | None = None
+    # Where objects may be (``sppl.region``): a Region the classes' positions are restricted
+    # to, or, for ``region cameras``, a CamerasRegion until the cameras are known.
+    region: Any = None
     # Fixed parts every hypothesis renders: the ground plane, a table that is always there.
     static_parts: tuple[Part, ...] = ()
     path: Path | None = None

@@ -747,6 +747,28 @@ def load_truth(truth: Path | bool | None, obs_root: Path) -> list[dict[str, Any]
         raise SpplError(f"{path}: not a scene file ({{\"objects\": [...]}})") from None
 
 
+def seen_html(summary: dict[str, Any]) -> str:
+    """The posterior over the number of objects some camera sees, in all and per class, as a
+    table, with the unseen objects the prior adds (``sppl.seen``); "" without seen marks."""
+    if "n_seen" not in summary:
+        return ""
+    rows = {"all classes": summary["n_seen"], **summary["seen_class_counts"]}
+    ks = sorted({int(k) for d in rows.values() for k in d})
+    head = "".join(f"<th>{k}</th>" for k in ks)
+    body = "".join(
+        f"<tr><td>{html.escape(name)}</td>"
+        + "".join(f"<td>{d.get(str(k), 0.0):.2f}</td>" for k in ks) + "</tr>"
+        for name, d in rows.items())
+    u = summary["unseen"]
+    return (
+        "<h2>What the cameras see</h2><p class='note'>Posterior probability of the number of "
+        "objects that some camera sees (at least one pixel, after occlusion). Objects no "
+        "camera sees are the prior's alone: the prior adds "
+        f"{u['mean']:.2f} of them on average (none in {u['p_none']:.0%} of samples).</p>"
+        f"<table><tr><th>objects seen</th>{head}</tr>{body}</table>"
+    )
+
+
 def write_report(
     run_folder: str | Path,
     *,
@@ -796,6 +818,7 @@ def write_report(
                     f"{cam_html}")
     sections.append("<h2>Posterior predictive: simulated observations beside the real "
                     f"ones</h2>{_explain('predictive')}{predictive_html}")
+    sections.append(seen_html(summary))
     sections.append("<h2>The posterior over counts</h2>" + _explain("counts")
                     + _figure_html(counts_figure(post, true_objects, folder)))
     sections.append("<h2>Occupancy</h2>" + _figure_html(

@@ -56,6 +56,7 @@ from .domains import Finite, Integer
 from .errors import SpplError
 from .model import Model
 from .observations import CameraSpec, Frame, Observations
+from .region import bind_region
 from .scoring import PriorScorer, Scorer
 from .simulate import sample_noise, sample_objects
 from .trace import Trace
@@ -373,6 +374,7 @@ def prior_recovery(
     counts, or a prior that depends on other parameters, with ``reference_draws`` independent
     scenes drawn from the prior by ``sample_objects`` (rejection sampling where constrained).
     """
+    model = for_checks(model)
     m = with_jumps(model, p_jump)
     chain_seq, ref_seq, pick_seq = _seq(seed).spawn(3)
     rng = np.random.default_rng(chain_seq)
@@ -462,9 +464,17 @@ def prior_recovery(
             if not draws:
                 rows.append(Row("prior", name, str(par.prior), "no draws", None, False))
                 continue
-            exact = _exact_test(draws, par, pick) if independent and par.prior_fn is None else None
+            restricted = cls.restriction is not None and par.name in cls.restriction.names
+            exact = (_exact_test(draws, par, pick)
+                     if independent and par.prior_fn is None and not restricted else None)
             if exact is not None:
                 expected, p = exact
+            elif restricted and independent:
+                # The prior restricted to the region, by rejection from the unrestricted one.
+                ref = list(cls.restriction.rejection_draws(reference_draws, pick)[
+                    :, cls.restriction.names.index(par.name)])
+                expected = f"{_describe(ref, par)} (rejection, n={len(ref)})"
+                p = float(stats.ks_2samp(draws, ref).pvalue)
             else:
                 expected = f"{_describe(ref, par)} ({where_ref}, n={len(ref)})"
                 if par.continuous:
@@ -508,6 +518,7 @@ def prior_declarations(model: Model, *, draws: int = 4000, seed=0, alpha: float 
     other values), for uniformity (KS; randomised between F(x - 1) and F(x) for integers),
     and each categorical parameter's draws against its probabilities (chi-square). Priors
     without a ``cdf`` are left out."""
+    model = for_checks(model)
     rng = np.random.default_rng(_seq(seed))
     rows = []
     owners = [(cls.name, cls.parameters, lambda c=cls: c.sample_prior(rng)) for cls in model.classes]
@@ -515,7 +526,12 @@ def prior_declarations(model: Model, *, draws: int = 4000, seed=0, alpha: float 
                for kind, s in model.sensors.items()]
     for owner, parameters, draw in owners:
         samples = [draw() for _ in range(draws)]
+        restricted = next((c.restriction for c in model.classes if c.name == owner), None)
+        if restricted is not None:
+            rows += _restriction_rows(owner, restricted, samples, rng)
         for par in parameters:
+            if restricted is not None and par.name in restricted.names:
+                continue  # its marginal is the restricted prior's: _restriction_rows
             name = f"{owner}.{par.name}: draws match density"
             # Where the density is zero at a draw, the prior the sampler targets (truncated
             # to the domain, renormalised per object) is not the one that births draw from.
@@ -549,6 +565,25 @@ def prior_declarations(model: Model, *, draws: int = 4000, seed=0, alpha: float 
             rows.append(Row("prior", name, "F(draw) uniform: mean 0.500, sd 0.289",
                             f"{_mean_sd(u)} (n={len(u)})", p))
     return Report(rows, alpha)
+
+
+def _restriction_rows(owner: str, r, samples, rng) -> list[Row]:
+    """A class's position draws, restricted to the model's region, against rejection sampling
+    from the unrestricted priors (KS on each coordinate), and the normaliser Z against the
+    share of those draws that land inside (binomial)."""
+    ref = r.rejection_draws(len(samples), rng)
+    rows = []
+    for i, name in enumerate(r.names):
+        draws = [v[name] for v in samples]
+        p = float(stats.ks_2samp(draws, ref[:, i]).pvalue)
+        rows.append(Row("prior", f"{owner}.{name}: draws match the region's prior",
+                        f"rejection: {_mean_sd(ref[:, i])}", _mean_sd(draws), p))
+    z, tries = math.exp(r.log_mass), 2 * len(samples)
+    inside = r.inside(tries, rng)
+    p = float(stats.binomtest(inside, tries, z).pvalue)
+    rows.append(Row("prior", f"{owner}: the region's normaliser", f"Z = {z:.4f}",
+                    f"{inside}/{tries} = {inside / tries:.4f} inside", p))
+    return rows
 
 
 def _one(values, rng):
@@ -588,6 +623,12 @@ def _exact_test(draws, par, rng) -> tuple[str, float] | None:
 
 # ---------------------------------------------------------------------------------------------
 # Observations for the checks that need a likelihood
+
+
+def for_checks(model: Model) -> Model:
+    """``model`` with a ``region cameras`` taken as the ground the verify cameras see (sized
+    by the unrestricted prior): the checks need a region before any observation is made."""
+    return bind_region(model, [spec.camera for spec in verify_cameras(model)])
 
 
 def verify_cameras(model: Model, size: int = 8, seed: int = 0) -> list[CameraSpec]:
@@ -741,6 +782,7 @@ def geweke(
     tests (Kolmogorov-Smirnov, chi-square for discrete quantities), whose false-alarm rate is
     then exact. A wrong move makes the chains drift from the prior, furthest at their end.
     """
+    model = for_checks(model)
     m = with_jumps(model, p_jump)
     if not m.sensors:
         return Report([], alpha, ["geweke: the model has no sensors, so there is nothing to test."])
@@ -890,6 +932,7 @@ def move_checks(
     look at what a state leaves unexplained) are among those checked; without, against no
     observations. The change-of-class pairings are checked too (``change_declarations``).
     """
+    model = for_checks(model)
     seq = _seq(seed)
     rng = np.random.default_rng(seq)
     if model.sensors and observe:
@@ -1021,6 +1064,7 @@ def sbc(
     those before, ``thin`` sweeps apart. That chain is stationary, so the truth's rank is
     exactly uniform however short the chain; a wrong move breaks the uniformity.
     """
+    model = for_checks(model)
     m = with_jumps(model, p_jump)
     if renderer is None:
         from .render import Renderer
@@ -1089,6 +1133,7 @@ def verify_model(
     and the others still run."""
     say = progress or (lambda message: None)
     prior_seq, moves_seq, geweke_seq, proposals_seq = _seq(seed).spawn(4)
+    model = for_checks(model)  # `region cameras`: the ground the verify cameras see
     if model.sensors and renderer is None and run_geweke:
         from .render import Renderer
 

@@ -148,6 +148,9 @@ class _Compiler(ImportsMixin, ShapesMixin):
         self.sensors: dict[str, _PendingSensor] = {}
         self.no_overlap = False
         self.max_objects: int | None = None
+        self.region = None  # sppl.region.Region or CamerasRegion
+        self.region_span: Span | None = None
+        self.restrictions: dict[str, object] = {}
         self.static_parts: list[Part] = []
         self.statics: dict[str, Span] = {}
         self.ground: Span | None = None
@@ -183,6 +186,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
             ast.Ground: self._ground,
             ast.Change: self.changes.append,
             ast.Constraint: self._constraint,
+            ast.Region: self._region,
             ast.Sensor: self._sensor,
             ast.Render: self._render,
             ast.Inference: self._inference,
@@ -197,6 +201,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
             )
         self._apply_steps()
         self._resolve_changes()
+        self._restrict()
         if self.main and not self.errors and not self.imported_errors:
             self._check_scene_size()
 
@@ -247,6 +252,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
             colours=dict(self.palette),
             no_overlap=self.no_overlap,
             max_objects=self.max_objects,
+            region=self.region,
             static_parts=tuple(self.static_parts),
             path=None if path == DEFAULT_PATH else Path(path),
             source=self.program.source,
@@ -276,6 +282,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
             floating=c.floating,
             correspondences=correspondences,
             correspondence_scales=scales,
+            restriction=self.restrictions.get(c.name),
         )
 
     def _global_scope(self, where: str = "a model setting") -> Scope:
@@ -619,6 +626,75 @@ class _Compiler(ImportsMixin, ShapesMixin):
         arg = self.expr.positional(rule)
         if arg is not None:
             self.max_objects = self._whole(arg[0], "`max_objects`")
+
+    def _region(self, node: ast.Region) -> None:
+        from .. import region as regions
+
+        kind = node.kind.text
+        if self.region_span is not None:
+            self.error(f"the region is already given on line {self.region_span.line}",
+                       node.span, "a model has one region; merge them into one polygon")
+            return
+        self.region_span = node.span
+        if kind not in regions.KINDS:
+            self.error(f"unknown region `{kind}`", node.kind.span,
+                       did_you_mean(kind, regions.KINDS) or known("regions", regions.KINDS))
+            return
+        scope = self._global_scope(where="a region")
+        try:
+            if kind == "cameras":
+                names = []
+                for a in node.args:
+                    if isinstance(a, ast.String | ast.Name):
+                        names.append(a.value if isinstance(a, ast.String) else a.id)
+                    else:
+                        self.error("`cameras(...)` takes the names of frames", a.span,
+                                   'e.g. `region cameras(left, "right")`')
+                        return
+                self.region = regions.CamerasRegion(tuple(names), self._where(node.span))
+            elif kind == "box":
+                if len(node.args) != 4 or any(
+                        isinstance(a, ast.Tuple | ast.String) for a in node.args):
+                    self.error("`box` takes four numbers: box(x_min, y_min, x_max, y_max)",
+                               node.span)
+                    return
+                values = self.expr.constants(node.args, scope)
+                if values is not None:
+                    self.region = regions.box(*values)
+            else:
+                points = []
+                for a in node.args:
+                    if not isinstance(a, ast.Tuple) or len(a.items) != 2:
+                        self.error("a polygon's corners are (x, y) pairs", a.span,
+                                   "e.g. `region polygon((0, 0), (4, 0), (0, 3))`")
+                        return
+                    xy = self.expr.constants(a.items, scope)
+                    if xy is None:
+                        return
+                    points.append(xy)
+                self.region = regions.polygon(points)
+        except regions.RegionError as error:
+            self.error(str(error), node.span)
+
+    def _where(self, span: Span) -> str:
+        return f"{self.program.path}:{span.line}:{span.column}"
+
+    def _restrict(self) -> None:
+        """Each placed class's position prior restricted to a box or polygon region, with its
+        normaliser (a camera region waits for the cameras: ``sppl.region.bind``)."""
+        from .. import region as regions
+
+        if self.region is None or isinstance(self.region, regions.CamerasRegion):
+            return
+        for c in self.classes.values():
+            if c.position is None:
+                continue
+            px, py = (_parameter(c, n) for n in c.position)
+            try:
+                self.restrictions[c.name] = regions.restrict(
+                    self.region, c.position, px.prior, py.prior, c.name)
+            except regions.RegionError as error:
+                self.error(str(error), self.region_span)
 
     def _resolve_changes(self) -> None:
         for node in self.changes:
