@@ -14,8 +14,10 @@ __version__ = "0.1.0"
 
 from .chain import Sampler
 from .compare import compare_scenes
+from .dataset import find_scenes, run_dataset
 from .errors import ModelError, ObservationError, RenderError, RunError, SpplError
 from .lang import compile_model, load_model, parse
+from .executors import LocalExecutor, RayExecutor
 from .likelihoods import Gaussian, Likelihood, available_likelihoods, register_likelihood
 from .model import Model
 from .observations import Observations, load_cameras, load_observations, write_observations
@@ -29,10 +31,12 @@ from .verify import verify_model
 __all__ = [
     "Gaussian",
     "Likelihood",
+    "LocalExecutor",
     "Model",
     "ModelError",
     "ObservationError",
     "Observations",
+    "RayExecutor",
     "ReferenceScorer",
     "RenderError",
     "Renderer",
@@ -43,6 +47,7 @@ __all__ = [
     "available_likelihoods",
     "compare_scenes",
     "compile_model",
+    "find_scenes",
     "load_cameras",
     "load_model",
     "load_observations",
@@ -54,6 +59,7 @@ __all__ = [
     "render_observations",
     "run_chain",
     "run_chains",
+    "run_dataset",
     "sample_noise",
     "sample_objects",
     "verify_model",

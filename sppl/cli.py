@@ -96,6 +96,14 @@ def _parser() -> argparse.ArgumentParser:
                    metavar="SECONDS",
                    help="save each chain's full state this often, for --resume "
                    f"(default: {CHECKPOINT_SECONDS:g})")
+    r.add_argument("--workers", type=int, default=None,
+                   help="with a data set (--obs naming a folder of observation folders, or a "
+                   "list file): how many tasks (scene x chain) run at once on this machine "
+                   "(default: one per CPU core)")
+    r.add_argument("--cluster", default=None, metavar="WHERE",
+                   help="with a data set: where its tasks run: local (worker processes, the "
+                   "default), ray (the Ray cluster in RAY_ADDRESS or on this machine, else a "
+                   "private one), ray://HOST:PORT or HOST:PORT")
 
     v = sub.add_parser(
         "verify",
@@ -151,9 +159,17 @@ OUT_KINDS = {
         "what": "a run folder", "writer": "`sppl sample`",
         "markers": {"run.json", "samples.jsonl", "summary.json", "checkpoint.json"},
         "files": {"run.json", "samples.jsonl", "summary.json", "summary.txt", "checkpoint.json",
-                  "checkpoint.json.tmp", "posterior.nc", ".sppl-write-test"},
+                  "checkpoint.json.tmp", "posterior.nc", "task.json", ".sppl-write-test"},
         "folders": {"report"},  # and chain_<i>/, each a run folder of one chain
         "chains": True,
+    },
+    "dataset": {
+        "what": "a data-set run folder", "writer": "`sppl sample` on a data set",
+        "markers": {"dataset.json"},
+        "files": {"dataset.json", "summary.json", "summary.txt", ".sppl-write-test"},
+        "folders": set(),  # and one run folder a scene
+        "chains": False,
+        "scenes": True,
     },
     "obs": {
         "what": "an observation folder", "writer": "`sppl simulate`",
@@ -182,6 +198,10 @@ def _not_ours(folder: Path, kind: str, prefix: str = "") -> str | None:
             inner = _not_ours(entry, kind, prefix=f"{entry.name}/")
             if inner:
                 return inner
+        elif entry.is_dir() and spec.get("scenes"):
+            inner = _not_ours(entry, "run")
+            if inner:
+                return f"{entry.name}/ is not a run folder: {inner}"
         elif entry.name not in (spec["folders"] if entry.is_dir() else spec["files"]):
             return f"it holds {name}, which {spec['writer']} does not write"
     if not prefix and not set(names) & spec["markers"] and not any(map(_is_chain_folder, names)):
@@ -322,6 +342,7 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_sample(args) -> int:
+    from .dataset import is_dataset
     from .lang import load_model
     from .observations import load_observations
     from .posterior import write_posterior
@@ -344,6 +365,11 @@ def cmd_sample(args) -> int:
     if not args.checkpoint_every >= 0:
         raise UsageError("--checkpoint-every is a number of seconds, 0 or more")
     model = load_model(args.model)
+    if args.resume is None and is_dataset(args.obs):
+        return _sample_dataset(args, model)
+    if args.workers is not None or args.cluster is not None:
+        raise UsageError("--workers and --cluster run the tasks of a data set; --obs names one "
+                         "observation folder (see docs/datasets.md)")
     obs = load_observations(args.obs)
     if args.resume is None:
         _prepare_out(args.out, args.force, kind="run",
@@ -367,12 +393,51 @@ def cmd_sample(args) -> int:
     return 0
 
 
+def _sample_dataset(args, model) -> int:
+    """``sppl sample`` over a data set: every scene x chain a task, one run folder a scene in
+    ``--out``; rerunning the same command continues what an earlier run left unfinished."""
+    from .dataset import DATASET_RECORD, format_dataset_summary, run_dataset
+    from .executors import make_executor
+
+    if args.lockstep:
+        raise UsageError("--lockstep runs the chains of one scene in this process; a data set's "
+                         "chains run as tasks (leave out --lockstep)")
+    executor = make_executor(args.cluster, args.workers)
+    out = args.out
+
+    def prepare_out():
+        if not (out / DATASET_RECORD).is_file() or args.force:  # else: continue that run
+            _prepare_out(out, args.force, kind="dataset",
+                         inputs={"the model argument": args.model, "--obs": args.obs})
+
+    result = run_dataset(
+        model, args.obs, out, chains=args.chains, steps=args.steps, seed=args.seed,
+        thin=args.thin, burn=args.burn, executor=executor,
+        checkpoint_seconds=args.checkpoint_every, progress=False if args.quiet else None,
+        on_scene=lambda name, line: print(line, flush=True), prepare_out=prepare_out,
+    )
+    summary = result.summary
+    print(format_dataset_summary(summary))
+    print(f"per scene: {out}/<scene>/; data-set summary: {out / 'summary.json'}")
+    if summary["interrupted"] or summary["finished"] + summary["failed"] < summary["scenes"]:
+        print("to continue: run the same command again", file=sys.stderr)
+        return 130
+    if summary["failed"]:
+        first = next(r["error"] for r in summary["per_scene"] if "error" in r)
+        raise SpplError(f"{summary['failed']} of {summary['scenes']} scenes failed; the first: "
+                        f"{first}")
+    return 0
+
+
 def _resume_settings(args) -> None:
     """Fill the options of ``sample --resume RUN`` from the run's record; refuse to change
     what would make the continued chain another chain."""
     from .run import read_run
 
     run = args.resume
+    if (run / "dataset.json").is_file():
+        raise UsageError(f"{run} is a data set's run; to continue it, run the command that "
+                         "started it again (it skips finished tasks and resumes stopped ones)")
     if args.out is not None and args.out.resolve() != run.resolve():
         raise UsageError("--resume continues a run in its own folder; leave out --out")
     if args.force:

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 from tqdm import tqdm
 
 from .chain import evaluate_batch
@@ -48,10 +47,11 @@ def run_lockstep(model: Model, observations: Observations, out: Path, *, chains:
     continues from its own checkpoint, so the chains may start a few sweeps apart; each
     stops at ``steps``. Ctrl-C or SIGTERM stop every chain at the end of the round."""
     from .render import Renderer
-    from .run import CHECKPOINT_SECONDS, ChainRun, Stop, _StopRequest, chain_folder
+    from .run import (CHECKPOINT_SECONDS, ChainRun, Stop, _StopRequest, chain_extra, chain_folder,
+                      chain_seeds)
 
     scorer = Scorer(model, observations, renderer or Renderer(model.render))
-    seeds = np.random.SeedSequence(seed).spawn(chains)
+    seeds = chain_seeds(seed, chains)
     runs: list[ChainRun] = []
     stopped = [False] * chains
     try:
@@ -61,7 +61,7 @@ def run_lockstep(model: Model, observations: Observations, out: Path, *, chains:
                 scorer=scorer, thin=thin, burn=burn, resume=resume,
                 checkpoint_seconds=(CHECKPOINT_SECONDS if checkpoint_seconds is None
                                     else checkpoint_seconds),
-                extra={"chain": i, "chains": chains, "master_seed": seed, "lockstep": True},
+                extra={**chain_extra(i, chains, seed), "lockstep": True},
             ))
         bar = tqdm(total=steps * chains, initial=sum(r.start for r in runs),
                    disable=None if progress is None else not progress,

@@ -1,10 +1,16 @@
 """``sppl report``: one HTML page that shows what a run found and how far to trust it.
 
-The page (``run/report/index.html``) needs no server and no script: it is plain HTML with its
-figures as PNG files beside it, so it opens from the file system and the figures can be used
-on their own. It shows, in order:
+The page (``run/report/index.html``) needs no server and no network: its figures are PNG files
+beside it, so it opens from the file system and the figures can be used on their own, and its
+one interactive part, a WebGL view, loads three.js from a file beside it with its data inlined
+(``sppl.report_view``). A paragraph above each part says, for a reader learning the method,
+what it means (``EXPLAIN``). It shows, in order:
 
+- a 3D view of the MAP scene, posterior samples as translucent ghosts, the cameras and (when
+  known) the true scene, with a slider over each chain's best scene so far;
 - for each camera: the observation, the MAP scene rendered from that camera, and the residual;
+- for each camera: the observation beside simulations of it from a few posterior samples
+  (rendered, with sensor noise at each sample's noise scale: the posterior predictive);
 - the posterior over the number of objects and over each class's count;
 - a top-down occupancy map: the probability that each ground cell is covered by an object,
   with the MAP's and (when known) the true footprints drawn over it;
@@ -36,6 +42,7 @@ from .posterior import RunFiles, diagnostics, kept_samples, load_run, posterior_
 MATCH_RADIUS = 0.5  # metres: a sample's object is "the same" as a MAP object within this
 OCCUPANCY_DRAWS = 300  # samples the occupancy map averages over (evenly spaced)
 MARGINAL_DRAWS = 4000  # samples the marginals are taken from (evenly spaced)
+PREDICTIVE_DRAWS = 3  # posterior samples simulated beside each camera's observation
 DPI = 90
 CHAIN_COLOURS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
                  "#7f7f7f", "#bcbd22", "#17becf"]
@@ -150,6 +157,55 @@ def camera_figures(model, obs, map_objects, folder: Path) -> list[Figure]:
             ))
     finally:
         renderer.release()
+    return figures
+
+
+def predictive_figures(model, obs, samples, folder: Path,
+                       draws: int = PREDICTIVE_DRAWS, seed: int = 0) -> list[Figure]:
+    """Per camera: the observation beside simulations of it from ``draws`` posterior samples
+    (evenly spaced), each rendered and given sensor noise at the sample's own noise scales,
+    as ``sppl simulate`` makes observations. ``seed`` fixes the noise, so a report is
+    reproducible."""
+    from .observations import CameraSpec
+    from .render import Renderer
+    from .simulate import objects_from_dict, render_observations
+
+    chosen = _even(samples, draws)
+    specs = [CameraSpec(f.camera, f.modalities) for f in obs.frames]
+    rng = np.random.default_rng(seed)
+    renderer = Renderer(model.render)
+    try:
+        simulated = [render_observations(
+            model, objects_from_dict(model, {"objects": s["objects"]}, "a stored sample"),
+            s["noise"], specs, renderer, rng) for s in chosen]
+    finally:
+        renderer.release()
+    figures = []
+    for k, frame in enumerate(obs.frames):
+        rows = [m for m in ("rgb", "depth") if getattr(frame, m) is not None]
+        fig = _figure(2.4 * (len(chosen) + 1), 2.5 * len(rows))
+        axes = fig.subplots(len(rows), len(chosen) + 1, squeeze=False)
+        for row, modality in zip(axes, rows):
+            for col, (ax, f) in enumerate(zip(row, [frame, *(sim[k] for sim in simulated)])):
+                if modality == "rgb":
+                    ax.imshow(np.clip(f.rgb, 0, 1), interpolation="nearest")
+                else:
+                    valid = f.depth_valid if f.depth_valid is not None else np.isfinite(f.depth)
+                    ax.imshow(np.where(valid, f.depth, np.nan), cmap="viridis_r", vmin=0,
+                              vmax=frame.camera.depth_max, interpolation="nearest")
+                s = chosen[col - 1] if col else None
+                ax.set_title(f"{frame.name}: observed {modality}" if s is None else
+                             f"sample at sweep {s['step']}: {len(s['objects'])} object"
+                             f"{'s' if len(s['objects']) != 1 else ''}", fontsize=9)
+                ax.set_xticks([])
+                ax.set_yticks([])
+        figures.append(Figure(
+            _save(fig, folder, f"predictive_{_safe(frame.name)}.png"),
+            f"Camera {frame.name}: posterior predictive",
+            f"Left, the observation; then {len(chosen)} posterior samples (evenly spaced over "
+            "every chain after burn-in) rendered from this camera with sensor noise drawn at "
+            "each sample's own noise scale, as sppl simulate makes observations.",
+        ))
     return figures
 
 
@@ -579,7 +635,82 @@ th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: left; }
 tr.warn td, tr.warn th { background: #fde8e8; }
 pre { background: #f6f6f6; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
 .caption, .note { color: #555; font-size: 0.92em; }
+.explain { background: #f3f7fb; border-left: 3px solid #4c72b0; padding: 0.5em 0.8em; }
 """
+
+
+# What each part of the page means, for a reader learning the method: one paragraph each,
+# shown above the part it explains.
+EXPLAIN = {
+    "intro": (
+        "sppl does not return one answer but a <b>posterior</b>: many complete guesses at the "
+        "scene (the <b>samples</b>), each a set of objects with classes, positions, sizes and "
+        "colours, drawn by Markov chain Monte Carlo so that a scene appears among them in "
+        "proportion to its posterior probability: how well it explains the images, times how "
+        "plausible the model's prior finds it. A question about the scene is answered by "
+        "counting over the samples (\"is there a cube on the left?\" is the fraction of samples "
+        "that have one). The <b>MAP</b> scene, the most probable one the chains visited, is a "
+        "convenient summary, not the answer."
+    ),
+    "view": (
+        "Solid: the MAP scene. Translucent <b>ghosts</b>: posterior samples (evenly spaced over "
+        "every chain after burn-in), each drawn faintly, so that an object on which all the "
+        "samples agree stacks up into a nearly solid shape while one they disagree about is a "
+        "faint cloud. Ghosts spread where the images do not pin the scene down: along a "
+        "camera's line of sight (an RGB camera sees direction well but distance poorly), "
+        "behind other objects, and outside every camera's view (the green frusta), where no "
+        "image says anything and the prior alone decides whether an object is there. Black "
+        "edges: the true scene, when the observation folder has one. The slider replays a "
+        "chain: each step is a sweep at which the chain found a scene better (a higher log "
+        "joint) than any before, from its start to its best. Drag to turn the view, "
+        "shift-drag or right-drag to move it, scroll to zoom, double-click to go back; "
+        "\"look through\" puts you where a camera is."
+    ),
+    "cameras": (
+        "The <b>residual</b> is what the MAP scene leaves unexplained. If the MAP were the "
+        "truth it would be the sensor noise alone: a fine speckle with no shape, its RMS close "
+        "to the inferred noise scale (in the summary above). A shape in it is a mistake: a "
+        "blob where an object was missed, a pair of opposite-signed crescents at the edges of "
+        "a misplaced one, a rim around one of the wrong size."
+    ),
+    "predictive": (
+        "A <b>posterior predictive</b> check: if the model fits and the chains have converged, "
+        "observations simulated from posterior samples look like the real one, noise "
+        "included. Differences between the simulations show the posterior's uncertainty (an "
+        "object present in some samples and not others); a difference all of them share "
+        "with the observation shows something the model, or the sampler, gets wrong."
+    ),
+    "counts": (
+        "The fraction of samples with each number of objects, and of each class. Objects "
+        "that no camera sees cost the likelihood nothing, so where the prior allows objects "
+        "outside the cameras' view, samples keep some there: the total count can be larger "
+        "and less certain than the number of objects the images show."
+    ),
+    "traces": (
+        "A chain starts from a scene that explains nothing (an empty one, or only the objects "
+        "a model says are always there) and climbs; the first sweeps (<b>burn-in</b>, "
+        "before the dotted line) still remember that start and are left out of every summary. "
+        "After it, a chain that has converged wanders over a steady band. Several chains "
+        "started independently should wander over the same band: one on a band of its own is "
+        "stuck in another explanation of the images (a <b>mode</b>), and the summaries that mix "
+        "it in cannot be trusted yet."
+    ),
+    "convergence": (
+        "A move rarely accepted barely moves the chain; one almost always accepted takes steps "
+        "too small to go far. Births and deaths are accepted rarely once the images are "
+        "explained, which is expected: most objects proposed at random contradict them. "
+        "<b>R-hat</b> compares the spread between chains with the spread within each: when "
+        "every chain explores the same distribution they are equal and R-hat is 1; above 1.01 "
+        "the chains disagree, so run longer (or more chains) and look at the traces. "
+        "<b>ESS</b> (effective sample size) is how many independent draws the chain's "
+        "correlated samples are worth: an estimate from an ESS of 20 is as rough as one from "
+        "20 draws, however many sweeps were run."
+    ),
+}
+
+
+def _explain(key: str) -> str:
+    return f"<p class='explain'>{EXPLAIN[key]}</p>"
 
 
 def _figure_html(f: Figure) -> str:
@@ -632,22 +763,36 @@ def write_report(
     samples = _all_samples(run)
     sections: list[str] = []
 
+    from .report_view import GHOST_DRAWS, view_data, view_html
+
+    extent = _extent(model, list(map_objects) + list(true_objects or []), obs.cameras)
+    view = view_data(model, run, map_objects, true_objects, _even(samples, GHOST_DRAWS),
+                     obs.cameras, extent)
+    sections.append("<h2>The scene in 3D: the MAP and posterior samples</h2>"
+                    + _explain("view") + view_html(view, folder))
     try:
         cams = camera_figures(model, obs, map_objects, folder)
         cam_html = "".join(_figure_html(f) for f in cams)
+        predictive = predictive_figures(model, obs, samples, folder)
+        predictive_html = "".join(_figure_html(f) for f in predictive)
     except RenderError as e:
-        cam_html = f"<p class='note'>No renders: {html.escape(str(e))}</p>"
-    sections.append(f"<h2>The cameras: observed, MAP, residual</h2>{cam_html}")
-    sections.append("<h2>The posterior over counts</h2>"
+        cam_html = predictive_html = f"<p class='note'>No renders: {html.escape(str(e))}</p>"
+    sections.append(f"<h2>The cameras: observed, MAP, residual</h2>{_explain('cameras')}"
+                    f"{cam_html}")
+    sections.append("<h2>Posterior predictive: simulated observations beside the real "
+                    f"ones</h2>{_explain('predictive')}{predictive_html}")
+    sections.append("<h2>The posterior over counts</h2>" + _explain("counts")
                     + _figure_html(counts_figure(post, true_objects, folder)))
     sections.append("<h2>Occupancy</h2>" + _figure_html(
         occupancy_figure(model, samples, map_objects, true_objects, obs.cameras, folder)))
     marg = marginal_figures(model, map_objects, samples, true_objects, folder)
     sections.append("<h2>Each MAP object's parameters</h2>"
                     + ("".join(_figure_html(f) for f in marg) or "<p>The MAP scene is empty.</p>"))
-    sections.append("<h2>Traces</h2>" + _figure_html(trace_figure(run, folder)))
+    sections.append("<h2>Traces</h2>" + _explain("traces")
+                    + _figure_html(trace_figure(run, folder)))
     sections.append(
-        "<h2>Moves and convergence</h2><h3>Acceptance rates</h3>" + acceptance_html(summary)
+        "<h2>Moves and convergence</h2>" + _explain("convergence")
+        + "<h3>Acceptance rates</h3>" + acceptance_html(summary)
         + _figure_html(acceptance_figure(summary, folder))
         + "<h3>R-hat and effective sample size</h3>"
         "<p class='note'>Computed only for quantities that do not depend on how the objects "
@@ -660,6 +805,7 @@ def write_report(
         sections.append("<h2>The MAP scene against the truth</h2>"
                         + truth_html(model, map_objects, true_objects))
 
+    from .report_view import VIEW_CSS
     from .samples import format_summary
 
     meta = run.meta
@@ -674,8 +820,9 @@ def write_report(
     )
     page = (
         "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
-        f"<title>sppl report: {html.escape(run_folder.name)}</title><style>{CSS}</style></head>"
-        f"<body><h1>sppl report: {html.escape(str(run_folder))}</h1>{info}"
+        f"<title>sppl report: {html.escape(run_folder.name)}</title>"
+        f"<style>{CSS}{VIEW_CSS}</style></head>"
+        f"<body><h1>sppl report: {html.escape(str(run_folder))}</h1>{info}{_explain('intro')}"
         f"<pre>{html.escape(format_summary(summary))}</pre>{''.join(sections)}</body></html>\n"
     )
     index = folder / "index.html"

@@ -297,6 +297,44 @@ def chain_folder(out: Path, index: int) -> Path:
     return out / f"chain_{index}"
 
 
+def chain_seeds(seed: int, chains: int) -> list[np.random.SeedSequence]:
+    """Chain i's stream: the i-th of ``SeedSequence(seed).spawn(chains)``."""
+    return np.random.SeedSequence(seed).spawn(chains)
+
+
+def chain_extra(index: int, chains: int, seed: int) -> dict[str, Any]:
+    """What a chain of several records in its own run.json about the run it belongs to."""
+    return {"chain": index, "chains": chains, "master_seed": seed}
+
+
+def write_chains_record(model: Model, observations: Observations, out: Path, *, chains: int,
+                        steps: int, seed: int, thin: int, burn: int | None, resume: bool = False,
+                        lockstep: bool = False) -> dict[str, Any]:
+    """``out/run.json`` of a run of several chains, each in ``out/chain_<i>/``: what
+    ``combine_chains`` pools and ``sppl sample --resume`` reads. A resumed run's record must
+    name the same model and observations (checked before any chain starts)."""
+    out.mkdir(parents=True, exist_ok=True)
+    fingerprints = {"model_sha256": model_fingerprint(model),
+                    "observations_sha256": observations_fingerprint(observations)}
+    if resume and (out / "run.json").exists():
+        _check_same_inputs(out, fingerprints)
+    meta = {
+        "sppl_version": __version__,
+        "seed": seed,
+        "chains": chains,
+        "steps": steps,
+        "thin": thin,
+        "burn": burn,
+        "model": str(model.path) if model.path else None,
+        "observations": str(observations.root),
+        "chain_folders": [chain_folder(out, i).name for i in range(chains)],
+        **fingerprints,
+        **({"lockstep": True} if lockstep else {}),
+    }
+    (out / "run.json").write_text(json.dumps(meta, indent=2))
+    return meta
+
+
 def _chain_worker(source, path, observations, out, steps, seed, thin, burn, index, extra, done,
                   errors, resume=False, checkpoint_seconds=CHECKPOINT_SECONDS) -> None:
     """One chain in its own process (and so with its own GL context). SIGINT is left to the
@@ -380,26 +418,9 @@ def run_chains(
         return run_chain(model, observations, out, steps=steps, seed=seed, thin=thin, burn=burn,
                          progress=progress, resume=resume, checkpoint_seconds=checkpoint_seconds,
                          extra={"lockstep": True} if lockstep else None)
-    out.mkdir(parents=True, exist_ok=True)
-    fingerprints = {"model_sha256": model_fingerprint(model),
-                    "observations_sha256": observations_fingerprint(observations)}
-    if resume and (out / "run.json").exists():
-        _check_same_inputs(out, fingerprints)  # before any chain starts
-    seeds = np.random.SeedSequence(seed).spawn(chains)
-    meta = {
-        "sppl_version": __version__,
-        "seed": seed,
-        "chains": chains,
-        "steps": steps,
-        "thin": thin,
-        "burn": burn,
-        "model": str(model.path) if model.path else None,
-        "observations": str(observations.root),
-        "chain_folders": [chain_folder(out, i).name for i in range(chains)],
-        **fingerprints,
-        **({"lockstep": True} if lockstep else {}),
-    }
-    (out / "run.json").write_text(json.dumps(meta, indent=2))
+    write_chains_record(model, observations, out, chains=chains, steps=steps, seed=seed,
+                        thin=thin, burn=burn, resume=resume, lockstep=lockstep)
+    seeds = chain_seeds(seed, chains)
     if lockstep:
         from .lockstep import run_lockstep
 
@@ -417,7 +438,7 @@ def run_chains(
             target=_chain_worker, name=f"sppl-chain-{i}",
             args=(model.source, str(model.path) if model.path else None, observations,
                   str(chain_folder(out, i)), steps, seeds[i], thin, burn, i,
-                  {"chain": i, "chains": chains, "master_seed": seed}, done, errors, resume,
+                  chain_extra(i, chains, seed), done, errors, resume,
                   checkpoint_seconds),
         )
         for i in range(chains)

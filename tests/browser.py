@@ -2,8 +2,13 @@
 
 Speaks the Chrome DevTools Protocol over ``--remote-debugging-pipe`` (file descriptors 3 and
 4, messages separated by NUL bytes), so it needs nothing but the standard library and a
-Chromium binary (Debian's ``chromium`` package). It records failed network loads, uncaught
-script exceptions and console errors, and asks the page which <img> elements did not load.
+Chromium binary (Debian's ``chromium`` package). It records failed network loads, requests
+for anything but local files, uncaught script exceptions and console errors, and asks the page
+which <img> elements did not load. It can wait for a script's condition, evaluate expressions
+in the page and take a screenshot of the page or of one element.
+
+WebGL runs on SwiftShader, Chromium's software rasteriser (there is no GPU in CI): the flags
+ask for it explicitly, since Chromium no longer falls back to it by itself.
 """
 
 from __future__ import annotations
@@ -21,8 +26,10 @@ from pathlib import Path
 FLAGS = [
     "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
     "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-quic",
-    "--remote-debugging-pipe",
+    "--remote-debugging-pipe", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+    "--window-size=1280,1000",  # a viewport that holds the whole 3D view (the default: 493 px)
 ]
+LOCAL_SCHEMES = ("file:", "data:", "blob:", "about:")
 
 BROKEN_IMAGES = (
     "JSON.stringify(Array.from(document.images)"
@@ -57,13 +64,16 @@ class PageCheck:
     failed_loads: list[dict] = field(default_factory=list)
     exceptions: list[str] = field(default_factory=list)
     console_errors: list[str] = field(default_factory=list)
+    remote_requests: list[str] = field(default_factory=list)
     screenshot: bytes | None = None
+    values: list = field(default_factory=list)  # what the ``evaluate`` expressions gave
 
     @property
     def problems(self) -> list[str]:
         return ([f"image did not load: {u}" for u in self.broken_images]
                 + [f"load failed: {f.get('errorText')} ({f.get('type')})"
                    for f in self.failed_loads]
+                + [f"asked the network for {u}" for u in self.remote_requests]
                 + [f"script error: {e}" for e in self.exceptions]
                 + [f"console error: {e}" for e in self.console_errors])
 
@@ -112,8 +122,14 @@ class _Pipe:
 
 
 def check_page(page: str | Path, chromium: str, *, timeout: float = 60.0,
-               screenshot: bool = False) -> PageCheck:
-    """Load ``page`` (a file) in headless Chromium; return what failed."""
+               screenshot: bool | str = False, wait_for: str | None = None,
+               evaluate: tuple[str, ...] = ()) -> PageCheck:
+    """Load ``page`` (a file) in headless Chromium; return what failed.
+
+    ``wait_for``: a script expression to wait for, after the load, until it is true (a
+    TimeoutError if it never is). ``evaluate``: expressions to evaluate then, in order, their
+    values in ``values``. ``screenshot``: True for the whole page, or a CSS selector for the
+    element to take (after the expressions ran)."""
     url = Path(page).resolve().as_uri()
     to_browser_r, to_browser_w = os.pipe()
     from_browser_r, from_browser_w = os.pipe()
@@ -151,12 +167,39 @@ def check_page(page: str | Path, chromium: str, *, timeout: float = 60.0,
                                       {"expression": "document.images.length",
                                        "returnByValue": True},
                                       session, deadline)["result"]["value"]
+
+            def evaluate_js(expression: str):
+                reply = pipe.call("Runtime.evaluate",
+                                  {"expression": expression, "returnByValue": True,
+                                   "awaitPromise": True}, session, deadline)
+                if "exceptionDetails" in reply:
+                    d = reply["exceptionDetails"]
+                    raise RuntimeError(f"{expression}: "
+                                       f"{d.get('exception', {}).get('description') or d}")
+                return reply["result"].get("value")
+
+            if wait_for is not None:
+                while not evaluate_js(f"Boolean({wait_for})"):
+                    if time.monotonic() + 1.0 > deadline:  # leave time to ask once more
+                        raise TimeoutError(f"this never came true on the page: {wait_for}")
+                    time.sleep(0.1)
+            result.values = [evaluate_js(e) for e in evaluate]
             if screenshot:
                 import base64
 
-                shot = pipe.call("Page.captureScreenshot",
-                                 {"format": "png", "captureBeyondViewport": True},
-                                 session, deadline)
+                params = {"format": "png", "captureBeyondViewport": True}
+                if isinstance(screenshot, str):
+                    # The element's content box (inside its border), in page coordinates,
+                    # scrolled into view and taken as laid out: capturing beyond the viewport
+                    # would lay the page out again, at another width.
+                    box = evaluate_js(
+                        f"(() => {{ const e = document.querySelector({json.dumps(screenshot)});"
+                        " e.scrollIntoView(); const r = e.getBoundingClientRect(); return ["
+                        "r.left + e.clientLeft + window.scrollX, r.top + e.clientTop + "
+                        "window.scrollY, e.clientWidth, e.clientHeight]; })()")
+                    params = {"format": "png",
+                              "clip": dict(zip(("x", "y", "width", "height"), box), scale=1)}
+                shot = pipe.call("Page.captureScreenshot", params, session, deadline)
                 result.screenshot = base64.b64decode(shot["data"])
             try:
                 pipe.send("Browser.close")
@@ -173,6 +216,10 @@ def check_page(page: str | Path, chromium: str, *, timeout: float = 60.0,
         method, params = m.get("method"), m.get("params", {})
         if method == "Network.loadingFailed":
             result.failed_loads.append(params)
+        elif method == "Network.requestWillBeSent":
+            url = params.get("request", {}).get("url", "")
+            if not url.startswith(LOCAL_SCHEMES):
+                result.remote_requests.append(url)
         elif method == "Runtime.exceptionThrown":
             d = params.get("exceptionDetails", {})
             result.exceptions.append(d.get("exception", {}).get("description") or d.get("text", ""))

@@ -231,7 +231,8 @@ def test_four_chains_on_three_shapes_agree_and_report_opens(tmp_path, require_gl
         failures.append(f"R-hat of the number of objects is not below 1.05:\n{out}")
     chromium = find_chromium()
     if chromium is not None:
-        page = check_page(tmp_path / "run" / "report" / "index.html", chromium)
+        page = check_page(tmp_path / "run" / "report" / "index.html", chromium,
+                          wait_for="window.spplViewReady === true")  # the 3D view drew
         if page.images < 6 or page.problems:
             failures.append(f"the report page: {page.images} images, {page.problems}")
     assert not failures, "\n".join(failures)

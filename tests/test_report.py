@@ -163,18 +163,26 @@ def report(two_chains):
 
 def test_the_report_has_every_section_and_its_figures(report):
     page = report.read_text()
-    for heading in ("The cameras", "The posterior over counts", "Occupancy",
-                    "Each MAP object", "Traces", "Acceptance rates", "R-hat",
-                    "The MAP scene against the truth"):
+    from sppl.report import EXPLAIN
+
+    for heading in ("The scene in 3D", "The cameras", "Posterior predictive",
+                    "The posterior over counts", "Occupancy", "Each MAP object", "Traces",
+                    "Acceptance rates", "R-hat", "The MAP scene against the truth"):
         assert heading in page, heading
+    for text in EXPLAIN.values():  # every explanation, once
+        assert page.count(text) == 1
     images = re.findall(r'<img src="([^"]+)"', page)
-    for name in ("camera_rgb.png", "camera_depth.png", "counts.png", "occupancy.png",
-                 "traces.png", "acceptance.png"):
+    for name in ("camera_rgb.png", "camera_depth.png", "predictive_rgb.png",
+                 "predictive_depth.png", "counts.png", "occupancy.png", "traces.png",
+                 "acceptance.png"):
         assert name in images
     assert any(i.startswith("object_0_") for i in images)
     for i in images:  # every figure is a PNG beside the page
         assert (report.parent / i).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert "<script" not in page and "http" not in page  # nothing to fetch, nothing to run
+    # Nothing to fetch: the one script file is three.js, beside the page.
+    assert re.findall(r'<script src="([^"]+)"', page) == ["three.min.js"]
+    assert (report.parent / "three.min.js").exists()
+    assert "http" not in page
 
 
 def test_the_report_without_a_truth(two_chains, tmp_path):
@@ -188,8 +196,85 @@ def test_the_report_opens_in_headless_chromium_with_nothing_missing(report):
     from browser import check_page, require_chromium
 
     result = check_page(report, require_chromium())
-    assert result.images >= 6
+    assert result.images >= 8
     assert result.problems == []
+
+
+def _view_data(page: str) -> dict:
+    raw = re.search(r'<script type="application/json" id="sppl-view-data">(.*?)</script>',
+                    page, re.DOTALL).group(1)
+    return json.loads(raw.replace("<\\/", "</"))
+
+
+def _parts(data: dict, scene: int) -> int:
+    return sum(len(o["parts"]) for o in data["scenes"][scene])
+
+
+def _hue_pixels(image, colour, min_chroma: float = 60) -> int:
+    """Pixels of ``image`` (H, W, 3 bytes) with the hue of ``colour`` (RGB in [0, 1]): their
+    colour minus its grey points the same way as the colour's, and is far from grey."""
+    px = np.asarray(image, dtype=float)[..., :3]
+    chroma = px - px.mean(axis=-1, keepdims=True)
+    c = np.asarray(colour, dtype=float) - np.mean(colour)
+    norm = np.linalg.norm(chroma, axis=-1)
+    cosine = (chroma @ c) / np.maximum(norm * np.linalg.norm(c), 1e-9)
+    return int(((norm > min_chroma) & (cosine > 0.95)).sum())
+
+
+# Each unit shape's centre (sppl/geometry.py): where to look for it on the screen.
+UNIT_CENTRES = {"box": (0, 0, 0.5), "cylinder": (0, 0, 0.5), "cone": (0, 0, 0.25),
+                "sphere": (0, 0, 1.0)}
+
+
+def test_the_3d_view_draws_the_map_ghosts_and_cameras_in_headless_chromium(report, model):
+    """The view draws (a WebGL frame, read back; a screenshot holding each MAP object's
+    colour where the object's centre projects), holds what the page's data says, replays the
+    chain, and logs no error."""
+    import io
+
+    from browser import check_page, require_chromium
+    from PIL import Image
+
+    from sppl.lang import load_model
+
+    data = _view_data(report.read_text())
+    centres = []
+    for o in data["scenes"][data["map"]]:
+        part = o["parts"][0]
+        matrix = np.reshape(part["m"], (4, 4)).T  # column-major
+        centres.append((matrix @ [*UNIT_CENTRES[part["p"]], 1.0])[:3].tolist())
+    hidden = "spplView.show({map: false, ghosts: false, truth: false, cameras: false})"
+    result = check_page(report, require_chromium(), wait_for="window.spplViewReady === true",
+                        screenshot="#sppl-view-canvas", evaluate=(
+                            "spplView.counts()",
+                            f"{hidden}, spplView.colouredPixels()",  # the grey ground alone
+                            "spplView.show({cameras: true}), spplView.colouredPixels()",
+                            "spplView.setFrame(0), spplView.counts()",
+                            "spplView.setFrame(1e9), spplView.counts()",
+                            "spplView.show({cameras: false, map: true}), spplView."
+                            + "colouredPixels()",
+                            f"spplView.project({json.dumps(centres)})",
+                        ))
+    assert result.problems == []
+    counts, grey, cameras, first, last, solid, on_screen = result.values
+    chain = next(c for c in data["chains"] if c["chain"] == data["map_chain"])
+    assert counts == {"solid": _parts(data, data["map"]), "ghosts": len(data["ghosts"]),
+                      "truth": _parts(data, data["truth"]), "cameras": 2,
+                      "chains": 2, "frames": len(chain["frames"])}
+    assert counts["solid"] == 2 and counts["ghosts"] == 30
+    assert grey == 0 < cameras  # nothing coloured but what is drawn on purpose
+    assert first["solid"] == _parts(data, chain["frames"][0]["scene"])
+    assert last["solid"] == counts["solid"]  # the slider's end is the MAP
+    assert solid > 200
+    shot = np.asarray(Image.open(io.BytesIO(result.screenshot)).convert("RGB"))
+    assert shot.shape[1] > 300
+    colours = load_model(model).colours
+    map_objects = json.loads((report.parent.parent / "summary.json").read_text())["map"]["objects"]
+    for o, (u, v) in zip(map_objects, on_screen, strict=True):
+        # Around where its centre projects, the MAP object's colour (shaded, not grey).
+        u, v = int(u), int(v)
+        patch = shot[v - 2:v + 3, u - 2:u + 3]
+        assert _hue_pixels(patch, colours[o["params"]["c"]]) >= 20, (o, patch)
 
 
 def test_the_browser_check_sees_a_missing_image_and_a_script_error(tmp_path):
@@ -199,13 +284,18 @@ def test_the_browser_check_sees_a_missing_image_and_a_script_error(tmp_path):
     Image = pytest.importorskip("PIL.Image")
     Image.new("RGB", (4, 4)).save(tmp_path / "here.png")
     page = tmp_path / "index.html"
+    # The remote image is on this machine's loopback: a page that asks for it would ask the
+    # network for it anywhere else.
     page.write_text("<!DOCTYPE html><html><body><img src='here.png'><img src='gone.png'>"
+                    "<img src='http://127.0.0.1:9/remote.png'>"
                     "<script>undefined_function();</script></body></html>")
     result = check_page(page, require_chromium())
-    assert result.images == 2
-    assert [u.rsplit("/", 1)[-1] for u in result.broken_images] == ["gone.png"]
+    assert result.images == 3
+    assert sorted(u.rsplit("/", 1)[-1] for u in result.broken_images) == ["gone.png",
+                                                                          "remote.png"]
     assert any("undefined_function" in e for e in result.exceptions), result
-    assert len(result.problems) >= 2
+    assert result.remote_requests == ["http://127.0.0.1:9/remote.png"]
+    assert len(result.problems) >= 3
 
 
 def test_ctrl_c_stops_every_chain_with_a_summary(model, obs, tmp_path):

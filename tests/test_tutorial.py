@@ -125,6 +125,10 @@ def test_every_command_of_the_tutorial_runs(tmp_path, require_gl):
     # What the page promises is there.
     run = tmp_path / "tutorial" / "run"
     for f in ("chain_0/samples.jsonl", "chain_1/samples.jsonl", "summary.json", "posterior.nc",
-              "report/index.html", "report/occupancy.png"):
+              "report/index.html", "report/occupancy.png", "report/three.min.js",
+              "report/predictive_front.png", "report/predictive_side.png"):
         assert (run / f).exists(), f
     assert (tmp_path / "tutorial" / "posterior.nc").stat().st_size > 0  # sppl export's
+    page = (run / "report" / "index.html").read_text()
+    for part in ("The scene in 3D", "look through", "replay", "Posterior predictive"):
+        assert part in page, part  # the parts of the report the tutorial walks through
