@@ -27,16 +27,16 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from sppl.camera import Camera, focal_from_fov, look_at  # noqa: E402
-from sppl.chain import Sampler  # noqa: E402
-from sppl.lang import load_model  # noqa: E402
-from sppl.model import RENDER_GROUP, Parameter  # noqa: E402
-from sppl.distributions import Gamma  # noqa: E402
-from sppl.domains import Positive  # noqa: E402
-from sppl.observations import CameraSpec, Observations  # noqa: E402
-from sppl.render import Renderer, renderer_string  # noqa: E402
-from sppl.scoring import Scorer  # noqa: E402
-from sppl.simulate import render_observations, sample_objects  # noqa: E402
+from sppl.camera import Camera, focal_from_fov, look_at
+from sppl.chain import Sampler
+from sppl.distributions import Gamma
+from sppl.domains import Positive
+from sppl.lang import load_model
+from sppl.model import RENDER_GROUP, Parameter
+from sppl.observations import CameraSpec, Observations
+from sppl.render import Renderer, renderer_string
+from sppl.scoring import Scorer
+from sppl.simulate import render_observations, sample_objects
 
 NOISE = {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}}
 

@@ -37,8 +37,8 @@ import numpy as np
 
 from .compare import compare_scenes, match_objects
 from .errors import RenderError, SpplError
-from .posterior import RunFiles, diagnostics, kept_samples, load_run, posterior_arrays
 from .model import RENDER_GROUP
+from .posterior import RunFiles, diagnostics, kept_samples, load_run, posterior_arrays
 
 MATCH_RADIUS = 0.5  # metres: a sample's object is "the same" as a MAP object within this
 OCCUPANCY_DRAWS = 300  # samples the occupancy map averages over (evenly spaced)

@@ -7,7 +7,6 @@ Statistical tests run at fixed seeds; each states its false-alarm rate.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -164,7 +163,7 @@ def _agree(fast, ref):
 
 
 def test_fast_and_reference_scores_agree_under_random_lighting(setting):
-    model, renderer, obs, truth, _ = setting
+    model, renderer, obs, _, _ = setting
     fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
     assert fast.pixels is not None
     rng = np.random.default_rng(1)
