@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_fast_scoring import _dense
 
 from sppl import moves, verify
 from sppl.camera import Camera, focal_from_fov, look_at
@@ -177,15 +178,7 @@ def _full_terms(scorer, trace):
     settings = scorer.settings_for(trace.noise)
     blocks, _ = scorer.pixels.render([scorer._drawn(trace.objects)],
                                      [scorer._lighting(trace.objects, settings)])
-    return [_image(block, camera) for block, camera in zip(blocks[0], scorer.pixels.cameras)]
-
-
-def _image(block, camera):
-    out = np.zeros((camera.height, camera.width, 2), dtype="f4")
-    if block is not None:
-        (r0, r1, c0, c1), terms = block
-        out[r0:r1, c0:c1] = terms
-    return out
+    return [_dense(block, camera) for block, camera in zip(blocks[0], scorer.pixels.cameras)]
 
 
 def _proposals_match_full_renders(setting, sweeps=4):
@@ -207,7 +200,7 @@ def _proposals_match_full_renders(setting, sweeps=4):
                 continue
             _, renders = fast.evaluate(p.objects, trace, p.noise)
             incremental += renders.pixels.parent is not None
-            pieced = [_image(b, c) for b, c in zip(renders.pixels.materialise(),
+            pieced = [_dense(b, c) for b, c in zip(renders.pixels.materialise(),
                                                    fast.pixels.cameras)]
             whole = _full_terms(fast, p)
             for a, b in zip(pieced, whole):

@@ -489,11 +489,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
                 count = item
                 pending.rate = self._count(item, local)
             elif isinstance(item, ast.Choice) and item.domain is None:
-                self.error(
-                    f"`{item.name.text}` has no domain",
-                    item.name.span,
-                    f"write `{item.name.text} : DOMAIN ~ PRIOR`, e.g. `: real`",
-                )
+                self._no_domain(item, "real")
             elif isinstance(item, ast.Setting):
                 key = item.key.text
                 if key not in _CLASS_SETTINGS:
@@ -699,11 +695,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
             elif item.name.text == "count":
                 self.error("a sensor has no `count`; counts belong to classes", item.name.span)
             elif item.domain is None:
-                self.error(
-                    f"`{item.name.text}` has no domain",
-                    item.name.span,
-                    f"write `{item.name.text} : DOMAIN ~ PRIOR`, e.g. `: positive`",
-                )
+                self._no_domain(item, "positive")
         self._compile_locals(own, local, pending, parameters_allowed=False)
         if likelihood is None:
             self.error(
@@ -774,6 +766,11 @@ class _Compiler(ImportsMixin, ShapesMixin):
                     did_you_mean(declared, wanted) or known("noise parameters", wanted),
                 )
 
+    def _no_domain(self, item: ast.Choice, example: str) -> None:
+        name = item.name.text
+        self.error(f"`{name}` has no domain", item.name.span,
+                   f"write `{name} : DOMAIN ~ PRIOR`, e.g. `: {example}`")
+
     def _first(self, key: tuple[str, ...], node: ast.Setting | ast.Step) -> bool:
         """Whether this is the first time a setting is given, reporting a repeat if not."""
         if key in self.seen:
@@ -797,8 +794,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
                     did_you_mean(name, LIGHTING) or known("lighting parameters", LIGHTING),
                 )
             elif item.domain is None:
-                self.error(f"`{name}` has no domain", item.name.span,
-                           f"write `{name} : DOMAIN ~ PRIOR`, e.g. `: positive`")
+                self._no_domain(item, "positive")
             elif name in self.lighting.declared:
                 self.error(f"the lighting parameter `{name}` is already declared", item.name.span)
             else:
