@@ -86,15 +86,24 @@ def evaluate_batch(requests) -> list[Trace | None]:
     if not pending:
         return out
     scorer = requests[0][0].scorer
-    asked = [(requests[i][2].objects, requests[i][1]) for i, _ in pending]
+    asked = [(requests[i][2].objects, requests[i][1], *_lighting(requests[i][0].model,
+                                                                 requests[i][2].noise))
+             for i, _ in pending]
     if hasattr(scorer, "evaluate_batch"):
         answers = scorer.evaluate_batch(asked)
     else:  # a scorer of the plain protocol (evaluate and log_likelihood)
-        answers = [scorer.evaluate(objects, parent=parent) for objects, parent in asked]
+        answers = [scorer.evaluate(*request) for request in asked]
     for (i, log_prior), (stats, renders) in zip(pending, answers):
         sampler, _, proposal = requests[i]
         out[i] = sampler.scored(proposal, log_prior, stats, renders)
     return out
+
+
+def _lighting(model: Model, noise) -> tuple:
+    """What a scorer is passed beyond the objects and the parent: the noise values, whose
+    render group lights the hypothesis, where the model has latent lighting; nothing
+    otherwise, so that a scorer of the plain protocol (objects, parent) still serves."""
+    return (noise,) if model.render.latent else ()
 
 
 class Sampler:
@@ -116,8 +125,8 @@ class Sampler:
         """The thesis's starting point: the given objects (default: an empty scene) and noise
         parameters drawn from their priors."""
         noise = {
-            kind: {p.name: p.prior.sample(self.rng) for p in sensor.noise}
-            for kind, sensor in self.model.sensors.items()
+            kind: {p.name: p.prior.sample(self.rng) for p in parameters}
+            for kind, parameters in self.model.noise_groups
         }
         if not objects and any(c.count for c in self.model.classes):
             # A class with a fixed count gives the empty scene no prior density: start from a
@@ -128,7 +137,7 @@ class Sampler:
         return self.make_trace(tuple(objects), noise)
 
     def make_trace(self, objects, noise) -> Trace:
-        stats, renders = self.scorer.evaluate(objects)
+        stats, renders = self.scorer.evaluate(objects, None, *_lighting(self.model, noise))
         log_prior = objects_log_prior(self.model, objects) + noise_log_prior(self.model, noise)
         return Trace(
             self.model, tuple(objects), noise, stats, log_prior,
@@ -145,7 +154,8 @@ class Sampler:
             stats, renders = trace.stats, trace.renders
         else:
             # Given the current trace, the scorer re-renders only what the move changed.
-            stats, renders = self.scorer.evaluate(proposal.objects, parent=trace)
+            stats, renders = self.scorer.evaluate(proposal.objects, trace,
+                                                  *_lighting(self.model, proposal.noise))
         return self.scored(proposal, log_prior, stats, renders)
 
     def evaluate_batch(self, requests) -> list[Trace | None]:
@@ -275,8 +285,8 @@ class Sampler:
                 trace = yield from self._parameter_step(trace, k, block)
         if rng.random() < m.inference.p_jump:
             trace = yield from self.decide(trace, self.propose_jump(trace))
-        for kind, sensor in m.sensors.items():
-            for p in sensor.noise:
+        for kind, parameters in m.noise_groups:
+            for p in parameters:
                 trace = yield from self._noise_step(trace, kind, p.name)
         self.warmup.sweep += 1
         return trace
@@ -290,8 +300,8 @@ class Sampler:
         Keep it the mirror image of ``sweep_steps``.
         """
         m, rng = self.model, self.rng
-        for kind, sensor in reversed(list(m.sensors.items())):
-            for p in reversed(sensor.noise):
+        for kind, parameters in reversed(m.noise_groups):
+            for p in reversed(parameters):
                 trace = yield from self._noise_step(trace, kind, p.name)
         if rng.random() < m.inference.p_jump:
             trace = yield from self.decide(trace, self.propose_jump(trace))

@@ -376,6 +376,10 @@ def cmd_check(args) -> int:
     for kind, s in model.sensors.items():
         noise = ", ".join(f"{p.name} ~ {p.prior}" for p in s.noise)
         print(f"sensor {kind}: likelihood {s.likelihood}; {noise}")
+    if model.render.latent:
+        print("render: " + ", ".join(f"{p.name} ~ {p.prior}" for p in model.render.latent))
+    if model.render.shadows:
+        print("render: parts cast shadows")
     if model.no_overlap:
         print("constraint: no two footprints overlap")
     if model.max_objects is not None:
@@ -424,6 +428,9 @@ def cmd_simulate(args) -> int:
     if args.scene:
         objects, noise = load_scene(model, args.scene)
         noise = noise or sample_noise(model, rng)
+        if any(group not in noise for group, _ in model.noise_groups):
+            # A scene that gives the sensors' noise but not the lighting: draw what is missing.
+            noise = {**sample_noise(model, rng), **noise}
     else:
         objects = sample_objects(model, rng, progress=_still_drawing)
         noise = sample_noise(model, rng)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Collection, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -242,12 +242,64 @@ class InferenceSettings:
     tries: int = 1
 
 
+# The render block's parameters a model may leave uncertain, each a latent choice with a prior
+# (``ambient : unit ~ beta(4, 6)``), and the domain each must have.
+LIGHTING = ("ambient", "intensity", "azimuth", "elevation", "gain", "red", "blue")
+RENDER_GROUP = "render"  # the name under which a trace keeps their values, beside the sensors'
+
+
 @dataclass(frozen=True)
 class RenderSettings:
+    """How a hypothesis is drawn. A part of colour c, lit at a surface whose normal makes the
+    lambert term lambert with the light, shows
+
+        balance * gain * c * (ambient + intensity * (1 - ambient) * lambert * lit)
+
+    where lit is 0 in the shadow of another part (``shadows``) and 1 elsewhere, and balance is
+    the white balance (red, 1, blue); the background shows balance * gain * background."""
+
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
     ambient: float = 0.35
     # Direction *towards* the light, in world coordinates.
     light: tuple[float, float, float] = (0.4, -0.3, 1.0)
+    intensity: float = 1.0
+    gain: float = 1.0
+    red: float = 1.0
+    blue: float = 1.0
+    # Whether parts cast shadows from the light (on the ground and on one another).
+    shadows: bool = False
+    # The lighting parameters the model leaves uncertain, with their priors (LIGHTING).
+    latent: tuple[Parameter, ...] = ()
+
+    def with_values(self, values: Mapping[str, float] | None) -> RenderSettings:
+        """These settings with the latent parameters at the given values. ``azimuth`` and
+        ``elevation`` (radians; azimuth from +x towards +y, elevation above the ground) set
+        the light's direction, each of the two not given taken from ``light``."""
+        if not values:
+            return self
+        changes = {k: float(v) for k, v in values.items() if k not in ("azimuth", "elevation")}
+        if "azimuth" in values or "elevation" in values:
+            x, y, z = np.asarray(self.light, dtype=float) / np.linalg.norm(self.light)
+            azimuth = float(values.get("azimuth", math.atan2(y, x)))
+            elevation = float(values.get("elevation", math.asin(max(-1.0, min(1.0, z)))))
+            changes["light"] = (math.cos(elevation) * math.cos(azimuth),
+                                math.cos(elevation) * math.sin(azimuth), math.sin(elevation))
+        return replace(self, **changes)
+
+    @property
+    def direction(self) -> tuple[float, float, float]:
+        """The unit vector towards the light."""
+        light = np.asarray(self.light, dtype=float)
+        return tuple(float(x) for x in light / np.linalg.norm(light))
+
+    @property
+    def balance(self) -> tuple[float, float, float]:
+        """What each channel of the image is multiplied by: gain times the white balance."""
+        return (self.gain * self.red, self.gain, self.gain * self.blue)
+
+    def shaded(self) -> tuple:
+        """What the shaders read of these settings, for telling two apart cheaply."""
+        return (self.direction, float(self.ambient), float(self.intensity), self.balance)
 
 
 @dataclass(frozen=True, eq=False)
@@ -278,6 +330,16 @@ class Model:
     @property
     def class_names(self) -> tuple[str, ...]:
         return tuple(c.name for c in self.classes)
+
+    @property
+    def noise_groups(self) -> tuple[tuple[str, tuple[Parameter, ...]], ...]:
+        """The latent parameters that are not objects', by group: each sensor's noise
+        parameters, then the render block's lighting (RENDER_GROUP) if it has any. A trace
+        keeps their values as ``noise[group][name]``."""
+        groups = tuple((kind, s.noise) for kind, s in self.sensors.items())
+        if self.render.latent:
+            groups += ((RENDER_GROUP, self.render.latent),)
+        return groups
 
 
 def uniform_categorical(values: tuple[str, ...]) -> Categorical:

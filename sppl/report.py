@@ -37,6 +37,7 @@ import numpy as np
 
 from .compare import compare_scenes, match_objects
 from .errors import RenderError, SpplError
+from .model import RENDER_GROUP
 from .posterior import RunFiles, diagnostics, kept_samples, load_run, posterior_arrays
 
 MATCH_RADIUS = 0.5  # metres: a sample's object is "the same" as a MAP object within this
@@ -106,18 +107,20 @@ def _xy(model, o: dict[str, Any]) -> np.ndarray:
 # Figures
 
 
-def camera_figures(model, obs, map_objects, folder: Path) -> list[Figure]:
-    """Per camera: observation, MAP render and residual, a row for each modality it has."""
+def camera_figures(model, obs, map_objects, folder: Path, map_noise=None) -> list[Figure]:
+    """Per camera: observation, MAP render and residual, a row for each modality it has; lit
+    by the MAP's lighting (``map_noise``'s render group) where the model leaves it latent."""
     from .render import Renderer
     from .simulate import objects_from_dict
 
     objects = objects_from_dict(model, {"objects": map_objects}, "MAP scene")
     parts = [*model.static_parts, *(p for o in objects for p in o.parts)]
     renderer = Renderer(model.render)
+    settings = model.render.with_values((map_noise or {}).get(RENDER_GROUP))
     figures = []
     try:
         for frame in obs.frames:
-            rgb, depth = renderer.render(parts, frame.camera)
+            rgb, depth = renderer.render(parts, frame.camera, settings)
             rows = [m for m in ("rgb", "depth") if getattr(frame, m) is not None]
             fig = _figure(9.0, 2.9 * len(rows))
             axes = fig.subplots(len(rows), 3, squeeze=False)
@@ -511,7 +514,7 @@ def _acceptance_table(summary: dict[str, Any]) -> dict[str, dict[str, tuple[int,
         row[label or "-"] = (c["proposed"], c["accepted"])
         n, a = row.get("all", (0, 0))
         row["all"] = (n + c["proposed"], a + c["accepted"])
-    order = ["birth", "death", "change", "parameters", "noise"]
+    order = ["birth", "death", "change", "parameters", "noise", "render"]
     return dict(sorted(table.items(), key=lambda kv: (order.index(kv[0]) if kv[0] in order else 99,
                                                        kv[0])))
 
@@ -808,7 +811,8 @@ def write_report(
     sections.append("<h2>The scene in 3D: the MAP and posterior samples</h2>"
                     + _explain("view") + view_html(view, folder))
     try:
-        cams = camera_figures(model, obs, map_objects, folder)
+        cams = camera_figures(model, obs, map_objects, folder,
+                              (summary.get("map") or {}).get("noise"))
         cam_html = "".join(_figure_html(f) for f in cams)
         predictive = predictive_figures(model, obs, samples, folder)
         predictive_html = "".join(_figure_html(f) for f in predictive)

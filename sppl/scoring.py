@@ -25,9 +25,10 @@ import numpy as np
 from .camera import Camera
 from .errors import ObservationError
 from .likelihoods import Likelihood, get_likelihood, gpu_statistics
-from .model import Model
+from .model import RENDER_GROUP, Model, RenderSettings
 from .observations import Observations
-from .render.bounds import CameraBounds, union
+from .render.bounds import CameraBounds, union, world_corners
+from .render.lighting import block, caster_rows, shadow_corners
 
 log = logging.getLogger(__name__)
 
@@ -90,12 +91,14 @@ class ReferenceScorer:
         self.terms = terms
         self.cameras = {t.frame: t.camera for t in terms}
 
-    def evaluate(self, objects, parent=None):
+    def evaluate(self, objects, parent=None, noise=None):
         """Render the objects for every camera; return the likelihood statistics of every term
         and the renders, as (stats, {frame: (rgb, depth)}). ``parent``, the trace the objects
-        were proposed from, lets a fast scorer work incrementally; this one ignores it."""
+        were proposed from, lets a fast scorer work incrementally; this one ignores it.
+        ``noise``, the trace's noise values, gives the lighting where the model leaves it
+        latent (its RENDER_GROUP); without it the model's fixed settings are used."""
         parts = self.parts(objects)
-        rendered = self.render(parts)
+        rendered = self.render(parts, self.settings_for(noise))
         stats = {
             (t.frame, t.kind): t.likelihood.statistics(
                 t.observed, rendered[t.frame][_OUTPUT[t.kind]], t.valid
@@ -105,9 +108,17 @@ class ReferenceScorer:
         return stats, rendered
 
     def evaluate_batch(self, requests):
-        """``evaluate`` of several (objects, parent) pairs, in order. This path renders one
-        hypothesis at a time; ``Scorer`` draws them together where it can."""
-        return [self.evaluate(objects, parent=parent) for objects, parent in requests]
+        """``evaluate`` of several (objects, parent) or (objects, parent, noise) requests, in
+        order. This path renders one hypothesis at a time; ``Scorer`` draws them together
+        where it can."""
+        return [self.evaluate(*request) for request in requests]
+
+    def settings_for(self, noise) -> RenderSettings:
+        """The render settings of a hypothesis with these noise values: the model's, with
+        its latent lighting parameters at the values ``noise`` holds for them."""
+        if not noise or RENDER_GROUP not in noise:
+            return self.model.render
+        return self.model.render.with_values(noise[RENDER_GROUP])
 
     def statistics(self, objects) -> dict[tuple[int, str], np.ndarray]:
         return self.evaluate(objects)[0]
@@ -116,9 +127,13 @@ class ReferenceScorer:
         """What a hypothesis draws: the static scenery, then each object's parts in order."""
         return [*self.model.static_parts, *(p for o in objects for p in o.parts)]
 
-    def render(self, parts) -> dict[int, tuple[np.ndarray, np.ndarray]]:
-        """{frame: (rgb, depth)} of these parts for every camera that has a term."""
-        return {f: self.renderer.render(parts, cam) for f, cam in self.cameras.items()}
+    def render(self, parts, settings: RenderSettings | None = None
+               ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """{frame: (rgb, depth)} of these parts for every camera that has a term, lit as
+        ``settings`` say (default: the renderer's)."""
+        if settings is None or settings is self.model.render:
+            return {f: self.renderer.render(parts, cam) for f, cam in self.cameras.items()}
+        return {f: self.renderer.render(parts, cam, settings) for f, cam in self.cameras.items()}
 
     def rendered(self, renders, term: Term) -> np.ndarray:
         """The rendered array a term compares with its observation."""
@@ -132,6 +147,13 @@ class ReferenceScorer:
         )
 
 
+def _empty_image(observed: np.ndarray, background: np.ndarray) -> float:
+    """The sum of squared residuals of an image against the empty scene's, which shows the
+    background everywhere."""
+    r = (observed - background).astype(np.float64)
+    return float(np.sum(r * r))
+
+
 class Renders(Mapping):
     """A hypothesis's renders, {frame: (rgb, depth)}, made the first time they are asked for.
 
@@ -140,13 +162,16 @@ class Renders(Mapping):
     fast path's record of the hypothesis's per-pixel terms, for incremental scoring.
     """
 
-    def __init__(self, scorer: ReferenceScorer, objects, pixels: _Pixels | None = None) -> None:
+    def __init__(self, scorer: ReferenceScorer, objects, pixels: _Pixels | None = None,
+                 settings: RenderSettings | None = None) -> None:
         self.scorer, self.objects, self.pixels = scorer, objects, pixels
+        self.settings = settings  # the lighting the hypothesis is drawn with (None: fixed)
         self._renders: dict | None = None
 
     def _all(self) -> dict:
         if self._renders is None:
-            self._renders = ReferenceScorer.render(self.scorer, self.scorer.parts(self.objects))
+            self._renders = ReferenceScorer.render(self.scorer, self.scorer.parts(self.objects),
+                                                   self.settings)
         return self._renders
 
     def __getitem__(self, frame):
@@ -246,8 +271,8 @@ class Scorer(ReferenceScorer):
         for t in self.terms:
             if t.kind == "image":
                 observed[t.frame][0] = t.observed
-                r = (t.observed - background).astype(np.float64)
-                self._constant[(t.frame, t.kind)] = (t.observed.size, float(np.sum(r * r)))
+                self._constant[(t.frame, t.kind)] = (t.observed.size,
+                                                     _empty_image(t.observed, background))
             else:
                 valid = np.ones(t.observed.shape, bool) if t.valid is None else t.valid
                 observed[t.frame][1] = np.where(valid, t.observed, np.nan)
@@ -259,65 +284,152 @@ class Scorer(ReferenceScorer):
         # and its sum of squares against the empty scene.
         self._terms = [(k, 2 * c + kind, float(self._constant[k][0]), self._constant[k][1])
                        for k, (c, kind) in self._slot.items()]
+        # The same, per white balance: the empty scene shows the background times it.
+        self._balanced = {(1.0, 1.0, 1.0): self._terms}
+        self._background = background
         self.pixels = PixelScorer(renderer.settings, [self.cameras[f] for f in self.frames],
                                   [observed[f] for f in self.frames])
         self.draws = DrawCache([CameraBounds(self.cameras[f]) for f in self.frames])
         static = model.static_parts
         self._static = [self.draws.of_parts(static)] if static else []
+        self._static_casters = caster_rows(static)
+        # Shadows reach down to the lowest surface a hypothesis has: the static parts' or an
+        # object's (``_shadow_rects``).
+        self._static_floor = float(world_corners(static)[2].min()) if static else 0.0
         self._area = sum(c.width * c.height for c in self.cameras.values())
         self._token = object()
 
-    def evaluate(self, objects, parent=None):
+    def evaluate(self, objects, parent=None, noise=None):
         if self.pixels is None:
-            return super().evaluate(objects)
-        return self._from_parent(objects, parent) or self.evaluate_many([objects])[0]
+            return super().evaluate(objects, noise=noise)
+        settings = self.settings_for(noise)
+        return (self._from_parent(objects, parent, settings)
+                or self.evaluate_many([objects], [settings])[0])
 
     def evaluate_batch(self, requests):
-        """``evaluate`` of several (objects, parent) pairs, in order, with the same results:
-        each that its parent can score incrementally is scored so (its regions are rendered
-        on their own), and all the others are drawn together before one read-back."""
+        """``evaluate`` of several (objects, parent) or (objects, parent, noise) requests, in
+        order, with the same results: each that its parent can score incrementally is scored
+        so (its regions are rendered on their own), and all the others are drawn together
+        before one read-back."""
         if self.pixels is None:
             return super().evaluate_batch(requests)
-        out = [self._from_parent(objects, parent) for objects, parent in requests]
+        settings = [self.settings_for(r[2] if len(r) > 2 else None) for r in requests]
+        out = [self._from_parent(r[0], r[1], s) for r, s in zip(requests, settings)]
         full = [i for i, result in enumerate(out) if result is None]
         if full:
-            for i, result in zip(full, self.evaluate_many([requests[i][0] for i in full])):
+            answers = self.evaluate_many([requests[i][0] for i in full], [settings[i] for i in full])
+            for i, result in zip(full, answers):
                 out[i] = result
         return out
 
-    def _from_parent(self, objects, parent):
+    def _from_parent(self, objects, parent, settings: RenderSettings):
         """``evaluate``'s answer scored incrementally from the parent trace, or None where
-        there is no parent of this scorer's or a full render is cheaper."""
+        there is no parent of this scorer's, the lighting differs from the parent's (a
+        lighting move changes every pixel) or a full render is cheaper."""
         before = getattr(parent, "renders", None)
         if isinstance(before, Renders) and before.scorer is self and before.pixels is not None:
-            pixels = self._incremental(parent.objects, objects, before.pixels)
+            if before.settings is not settings and before.settings.shaded() != settings.shaded():
+                return None
+            pixels = self._incremental(parent.objects, objects, before.pixels, settings)
             if pixels is not None:
-                return self._stats(pixels.sums), Renders(self, objects, pixels)
+                return self._stats(pixels.sums, settings), Renders(self, objects, pixels, settings)
         return None
 
-    def evaluate_many(self, hypotheses):
-        """``evaluate`` for several object sets, whole (no parent)."""
+    def evaluate_many(self, hypotheses, settings=None):
+        """``evaluate`` for several object sets, whole (no parent), each lit by its settings
+        (default: the model's)."""
+        settings = settings or [self.model.render] * len(hypotheses)
         if self.pixels is None:
-            return [super().evaluate(objects) for objects in hypotheses]
-        blocks, sums = self.pixels.render([self._drawn(objects) for objects in hypotheses])
+            return [self._reference(objects, s) for objects, s in zip(hypotheses, settings)]
+        lighting = [self._lighting(objects, s) for objects, s in zip(hypotheses, settings)]
+        blocks, sums = self.pixels.render([self._drawn(objects) for objects in hypotheses],
+                                          lighting)
         out = []
-        for b, objects in enumerate(hypotheses):
+        for b, (objects, s) in enumerate(zip(hypotheses, settings)):
             flat = sums[b].ravel().tolist()
-            out.append((self._stats(flat), Renders(self, objects, _Pixels(flat, blocks[b]))))
+            out.append((self._stats(flat, s), Renders(self, objects, _Pixels(flat, blocks[b]), s)))
         return out
 
     # -- helpers -------------------------------------------------------------------------------
 
+    def _reference(self, objects, settings):
+        rendered = ReferenceScorer.render(self, self.parts(objects), settings)
+        return {(t.frame, t.kind): t.likelihood.statistics(
+            t.observed, rendered[t.frame][_OUTPUT[t.kind]], t.valid) for t in self.terms}, rendered
+
     def _drawn(self, objects) -> list:
         return [*self._static, *(self.draws.of_object(o) for o in objects)]
 
-    def _stats(self, sums: list[float]) -> dict[tuple[int, str], np.ndarray]:
-        return {key: np.array((n, max(empty + sums[i], 0.0)))
-                for key, i, n, empty in self._terms}
+    def _lighting(self, objects, settings: RenderSettings) -> bytes:
+        """The ``Lighting`` block of a hypothesis: its settings and, with shadows, every
+        part's caster rows (each object's worked out once, kept in its cache)."""
+        if not settings.shadows:
+            return block(settings)
+        rows = [self._static_casters]
+        for o in objects:
+            found = o.cache.get(caster_rows)
+            if found is None:
+                found = o.cache[caster_rows] = caster_rows(o.parts)
+            rows.append(found)
+        return block(settings, b"".join(rows))
 
-    def _incremental(self, old_objects, objects, before: _Pixels) -> _Pixels | None:
+    def _stats(self, sums: list[float], settings: RenderSettings | None = None
+               ) -> dict[tuple[int, str], np.ndarray]:
+        terms = self._terms
+        if settings is not None and settings.balance != (1.0, 1.0, 1.0):
+            terms = self._balanced_terms(settings.balance)
+        return {key: np.array((n, max(empty + sums[i], 0.0)))
+                for key, i, n, empty in terms}
+
+    def _balanced_terms(self, balance) -> list:
+        """``_terms`` with the empty scene's sums for a background shown times ``balance``
+        (a few kept: a chain's lighting moves visit a new balance at each acceptance)."""
+        found = self._balanced.get(balance)
+        if found is None:
+            if len(self._balanced) > 64:
+                self._balanced = {(1.0, 1.0, 1.0): self._terms}
+            shown = (self._background * np.asarray(balance, dtype="f4")).astype("f4")
+            by_key = {(t.frame, t.kind): t for t in self.terms}
+            found = self._balanced[balance] = [
+                (k, i, n, _empty_image(by_key[k].observed, shown) if k[1] == "image" else empty)
+                for k, i, n, empty in self._terms]
+        return found
+
+    def _shadow_rects(self, changed, objects, old_objects, settings: RenderSettings):
+        """Per camera, the rectangle of pixels the changed objects' shadows can darken, before
+        and after the move (None: none); False when no rectangle bounds them (the light at or
+        below the horizon, or a corner behind a camera), and the whole image must be drawn."""
+        corners_of = self._corners
+        floor = min(self._static_floor,
+                    *(corners_of(o)[1] for o in (*old_objects, *objects)))
+        rects = [None] * len(self.frames)
+        for o in changed:
+            volume = shadow_corners(corners_of(o)[0], settings.direction, floor)
+            if volume is None:
+                return False
+            for c, bounds in enumerate(self.draws.bounds):
+                rect = bounds.rect_of(volume)
+                if rect == bounds.full:
+                    return False
+                rects[c] = union(rects[c], rect)
+        return rects
+
+    @staticmethod
+    def _corners(obj):
+        """An object's parts' bounding-box corners (4, 8n) and their lowest height, cached."""
+        found = obj.cache.get(world_corners)
+        if found is None:
+            corners = world_corners(obj.parts) if obj.parts else np.zeros((4, 0))
+            low = float(corners[2].min()) if obj.parts else np.inf
+            found = obj.cache[world_corners] = (corners, low)
+        return found
+
+    def _incremental(self, old_objects, objects, before: _Pixels,
+                     settings: RenderSettings | None = None) -> _Pixels | None:
         """The new hypothesis's record from its parent's, re-rendering only the rectangles
-        the changed objects cover before or after; None when a full render is cheaper."""
+        the changed objects cover before or after, and with shadows the rectangles their
+        shadows can reach; None when a full render is cheaper."""
+        settings = settings or self.model.render
         if len(old_objects) == len(objects):
             # The usual move changes objects in place: those that differ, at either end.
             changed = [o for pair in zip(old_objects, objects) if pair[0] is not pair[1]
@@ -332,6 +444,11 @@ class Scorer(ReferenceScorer):
         rects = of_object(changed[0]).rects
         for o in changed[1:]:
             rects = [union(r, s) for r, s in zip(rects, of_object(o).rects)]
+        if settings.shadows:
+            shadows = self._shadow_rects(changed, objects, old_objects, settings)
+            if shadows is False:
+                return None
+            rects = [union(r, s) for r, s in zip(rects, shadows)]
         area = 0
         for r in rects:
             if r is not None:
@@ -341,7 +458,8 @@ class Scorer(ReferenceScorer):
         if area == 0:
             return before  # no camera sees the change
         blocks = before.materialise()
-        patches = self.pixels.render_regions(self._drawn(objects), rects)
+        patches = self.pixels.render_regions(self._drawn(objects), rects,
+                                             self._lighting(objects, settings))
         # The sums as plain floats: a move's few additions cost less than numpy's indexing.
         sums = list(before.sums)
         kept = []
@@ -363,7 +481,7 @@ class PriorScorer:
     terms: list[Term] = []
     cameras: dict = {}
 
-    def evaluate(self, objects, parent=None):
+    def evaluate(self, objects, parent=None, noise=None):
         return {}, {}
 
     def evaluate_batch(self, requests):

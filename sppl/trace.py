@@ -180,8 +180,8 @@ class Trace:
                 out[("object", i, p.name)] = Choice(
                     o.values[p.name], p.log_prob(o.values[p.name], o.values)
                 )
-        for kind, sensor in self.model.sensors.items():
-            for p in sensor.noise:
+        for kind, parameters in self.model.noise_groups:
+            for p in parameters:
                 value = self.noise[kind][p.name]
                 out[("noise", kind, p.name)] = Choice(value, p.log_prob(value))
         return out
@@ -205,7 +205,7 @@ def objects_log_prior(model: Model, objects) -> float:
 
 def noise_log_prior(model: Model, noise: Mapping[str, Mapping[str, float]]) -> float:
     total = 0.0
-    for kind, sensor in model.sensors.items():
-        for p in sensor.noise:
+    for kind, parameters in model.noise_groups:
+        for p in parameters:
             total += p.log_prob(noise[kind][p.name])
     return total

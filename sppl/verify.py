@@ -54,7 +54,7 @@ from .camera import Camera, focal_from_fov, look_at
 from .chain import Sampler
 from .domains import Finite, Integer
 from .errors import SpplError
-from .model import Model
+from .model import RENDER_GROUP, Model
 from .observations import CameraSpec, Frame, Observations
 from .region import bind_region
 from .scoring import PriorScorer, Scorer
@@ -316,17 +316,22 @@ def with_prior_noise_steps(model: Model, *, draws: int = 2000, seed=0) -> Model:
     whatever its scale (as ``with_jumps`` says of the jump chance), so the move checked is the
     same; only its tuning differs."""
     rng = np.random.default_rng(_seq(seed))
-    sensors = {}
-    for kind, sensor in model.sensors.items():
-        noise = []
-        for p in sensor.noise:
+
+    def widened(parameters):
+        out = []
+        for p in parameters:
             if p.continuous:
                 spread = float(np.std([p.prior.sample(rng) for _ in range(draws)]))
                 if spread > p.proposal_scale:
                     p = replace(p, proposal_scale=spread)
-            noise.append(p)
-        sensors[kind] = replace(sensor, noise=tuple(noise))
-    return replace(model, sensors=sensors)
+            out.append(p)
+        return tuple(out)
+
+    sensors = {kind: replace(sensor, noise=widened(sensor.noise))
+               for kind, sensor in model.sensors.items()}
+    # The render block's lighting parameters are random walks of the same kind.
+    render = replace(model.render, latent=widened(model.render.latent))
+    return replace(model, sensors=sensors, render=render)
 
 
 # The moves without which a chain cannot reach every scene: against observations each of them
@@ -483,9 +488,9 @@ def prior_recovery(
                     p = chisquare_two_sample(draws, ref)[1]
             rows.append(Row("prior", name, expected, observed, p))
 
-    # Noise parameters: their priors are untouched by any constraint.
-    for kind, sensor in m.sensors.items():
-        for par in sensor.noise:
+    # Noise and lighting parameters: their priors are untouched by any constraint.
+    for kind, parameters in m.noise_groups:
+        for par in parameters:
             series = np.array([noise[kind][par.name] for _, noise in states])
             keep, step = thinned(series)
             if too_short(f"{kind}.{par.name}", step):
@@ -522,8 +527,8 @@ def prior_declarations(model: Model, *, draws: int = 4000, seed=0, alpha: float 
     rng = np.random.default_rng(_seq(seed))
     rows = []
     owners = [(cls.name, cls.parameters, lambda c=cls: c.sample_prior(rng)) for cls in model.classes]
-    owners += [(kind, s.noise, lambda s=s: {p.name: p.prior.sample(rng) for p in s.noise})
-               for kind, s in model.sensors.items()]
+    owners += [(kind, ps, lambda ps=ps: {p.name: p.prior.sample(rng) for p in ps})
+               for kind, ps in model.noise_groups]
     for owner, parameters, draw in owners:
         samples = [draw() for _ in range(draws)]
         restricted = next((c.restriction for c in model.classes if c.name == owner), None)
@@ -670,9 +675,13 @@ class _Simulator:
         self.renderer = renderer
         self.likelihoods = {k: get_likelihood(s.likelihood, s.options) for k, s in model.sensors.items()}
 
-    def render(self, objects) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    def render(self, objects, noise=None) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """Every verify camera's render of the objects, lit as ``noise``'s render group (if
+        the model has lighting parameters) says."""
         parts = [*self.model.static_parts, *(p for o in objects for p in o.parts)]
-        return {i: self.renderer.render(parts, s.camera) for i, s in enumerate(self.specs)}
+        settings = self.model.render.with_values((noise or {}).get(RENDER_GROUP))
+        return {i: self.renderer.render(parts, s.camera, settings)
+                for i, s in enumerate(self.specs)}
 
     def observe(self, renders, noise, rng) -> Observations:
         frames = []
@@ -747,8 +756,8 @@ def scene_quantities(model: Model) -> list[Quantity]:
                 for v in par.domain.values:
                     out.append((f"{name} = {v}", lambda objs, noise, c=cls, n=par.name, v=v:
                                 float(sum(o.values[n] == v for o in objs if o.cls is c)), True))
-    for kind, sensor in model.sensors.items():
-        for par in sensor.noise:
+    for kind, parameters in model.noise_groups:
+        for par in parameters:
             out.append((f"{kind}.{par.name}", lambda objs, noise, k=kind, n=par.name:
                         float(noise[k][n]), False))
     return out
@@ -807,7 +816,7 @@ def geweke(
     for r, chain_seq in enumerate(sc_seq.spawn(chains)):
         rng = np.random.default_rng(chain_seq)
         objs, noise = sample_objects(m, rng), sample_noise(m, rng)
-        renders = sim.render(objs)
+        renders = sim.render(objs, noise)
         sampler = sim.sampler(sim.observe(renders, noise, rng), rng, sampler_factory, stats_,
                               warmup)
         stats_ = sampler.stats
@@ -942,7 +951,7 @@ def move_checks(
             renderer = Renderer(model.render)
         sim = _Simulator(model, verify_cameras(model, size), renderer)
         objs, noise = sample_objects(model, rng), sample_noise(model, rng)
-        sampler = sim.sampler(sim.observe(sim.render(objs), noise, rng), rng, sampler_factory)
+        sampler = sim.sampler(sim.observe(sim.render(objs, noise), noise, rng), rng, sampler_factory)
     else:
         sampler = sampler_factory(model, PriorScorer(), rng)
     jumps = {j for j, p in sampler.jump.items() if p > 0}
@@ -962,8 +971,8 @@ def move_checks(
             k = int(rng.integers(len(trace.objects)))
             for block in moves.parameter_blocks(trace.objects[k].cls):
                 proposals.append(moves.propose_parameters(model, trace, k, block, rng))
-        for kind, sensor in model.sensors.items():
-            for p in sensor.noise:
+        for kind, parameters in model.noise_groups:
+            for p in parameters:
                 proposals.append(moves.propose_noise(model, trace, kind, p.name, rng))
         for p in proposals:
             if p.move in no_reverse:
@@ -1078,7 +1087,7 @@ def sbc(
     for r, rep_seq in enumerate(replicate_seqs):
         rng = np.random.default_rng(rep_seq)
         objs, noise = sample_objects(m, rng), sample_noise(m, rng)
-        renders = sim.render(objs)
+        renders = sim.render(objs, noise)
         sampler = sim.sampler(sim.observe(renders, noise, rng), rng, sampler_factory,
                               warmup=warmup)
         truth = _trace_with(sampler, objs, noise, renders)

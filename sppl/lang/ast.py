@@ -272,7 +272,9 @@ class Sensor:
 
 @dataclass(frozen=True)
 class Render:
-    settings: tuple[Setting, ...]
+    """``render { ... }``: settings, and choices of the latent lighting parameters."""
+
+    settings: tuple[Setting | Choice, ...]
     span: Span
 
 

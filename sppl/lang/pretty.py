@@ -204,7 +204,8 @@ class _Printer:
         elif isinstance(node, ast.Render):
             self._open("render", node)
             for item in node.settings:
-                self._add(_setting(item), 1, item.span)
+                line = _setting(item) if isinstance(item, ast.Setting) else _choice(item)
+                self._add(line, 1, item.span)
             self._close(node)
         elif isinstance(node, ast.Inference):
             self._open("inference", node)

@@ -4,8 +4,6 @@
 // colour: for each modality, (observed - rendered)^2 minus (observed - background)^2. Pixels no
 // part covers keep the cleared 0, so the image's sum is the sum of squared residuals less that
 // of the empty scene, which is computed once on the CPU.
-uniform vec3 light;
-uniform float ambient;
 uniform bool ray_depth;
 uniform float depth_max;
 uniform vec3 background;
@@ -38,15 +36,14 @@ void main() {
     normal = v_normal_matrix * unit_normal;
     gl_FragDepth = window_depth(projection, camera_point);
 #endif
-    float lambert = max(dot(normalize(normal), light), 0.0);
-    vec3 colour = v_colour * (ambient + (1.0 - ambient) * lambert);
+    vec3 colour = shade(v_colour, normal, camera_point);
     float depth = ray_depth ? length(camera_point) : -camera_point.z;
     depth = min(depth, depth_max);
     vec4 o = texelFetch(observed, ivec2(gl_FragCoord.xy), 0);
     float image = 0.0;
     if (o.r > MISSING_BELOW) {
         vec3 a = o.rgb - colour;
-        vec3 b = o.rgb - background;
+        vec3 b = o.rgb - balance.rgb * background;
         image = dot(a, a) - dot(b, b);
     }
     float range = 0.0;
