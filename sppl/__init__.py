@@ -23,10 +23,12 @@ from .model import Model
 from .observations import Observations, load_cameras, load_observations, write_observations
 from .posterior import load_run, open_posterior, write_posterior
 from .proposal_checks import check_proposals, joint_check
+from .region import RegionError, bind_region
 from .render import Renderer, raycast
 from .robust import Mixture, StudentT
 from .run import run_chain, run_chains
 from .scoring import ReferenceScorer, Scorer
+from .seen import SeenPass, seen_reference
 from .simulate import render_observations, sample_noise, sample_objects
 from .verify import verify_model
 
@@ -41,15 +43,18 @@ __all__ = [
     "Observations",
     "RayExecutor",
     "ReferenceScorer",
+    "RegionError",
     "RenderError",
     "Renderer",
     "RunError",
     "Sampler",
     "Scorer",
+    "SeenPass",
     "SpplError",
     "StudentT",
     "available_likelihoods",
     "check_proposals",
+    "bind_region",
     "compare_scenes",
     "compile_model",
     "find_scenes",
@@ -68,6 +73,7 @@ __all__ = [
     "run_dataset",
     "sample_noise",
     "sample_objects",
+    "seen_reference",
     "verify_model",
     "write_observations",
     "write_posterior",

@@ -8,10 +8,11 @@ is off (its ray followed down to the ground plane).
 
 The proposal stays exact. Its density over the two position parameters is the mixture
 
-    q(x, y | state) = (1 - w) p(x) p(y) + w (1/M) sum_i Normal((x, y); point_i, h^2 I)
+    q(x, y | state) = (1 - w) p(x, y) + w (1/M) sum_i Normal((x, y); point_i, h^2 I)
 
-where the points are a deterministic function of the state (the renders of its objects), and
-every other parameter is drawn from its prior. A death's reverse is a birth from the state
+where p(x, y) is the class's position prior (restricted to the model's region if it has one,
+sppl/region.py), the points are a deterministic function of the state (the renders of its
+objects), and every other parameter is drawn from its prior. A death's reverse is a birth from the state
 after the death, so the death's ratio evaluates the same density with the points of that
 state; docs/inference.md has the derivation. ``w`` is the model's ``data_birth`` setting
 (0 gives the thesis's prior-only births).
@@ -106,12 +107,12 @@ class BirthProposal:
         pts = self.points(trace) if cls.position else np.empty((0, 2))
         if not len(pts):
             return cls.log_prior(values)
-        px, py = (cls.parameter(n) for n in cls.position)
-        x, y = values[px.name], values[py.name]
+        x, y = values[cls.position[0]], values[cls.position[1]]
         # The other parameters are drawn from their priors; none of them depends on the
-        # position (the compiler only declares a position that nothing depends on).
+        # position (the compiler only declares a position that nothing depends on). The
+        # position's prior is the class's, restricted to the model's region if it has one.
         rest = cls.log_prior(values, only=[n for n in cls.parameter_names if n not in cls.position])
-        log_prior_xy = px.log_prob(x) + py.log_prob(y)
+        log_prior_xy = cls.log_prior(values, only=cls.position)
         d2 = ((pts - (x, y)) ** 2).sum(axis=1)
         h2 = self.spread**2
         log_kernel = -0.5 * d2 / h2 - _LOG_2PI - math.log(h2)

@@ -21,6 +21,7 @@ import numpy as np
 from . import fit, merge, moves, tries
 from .birth import BirthProposal
 from .model import Model
+from .region import bind_region
 from .trace import Trace, noise_log_prior, objects_log_prior, overlaps_any
 from .warmup import Warmup
 
@@ -85,22 +86,34 @@ def evaluate_batch(requests) -> list[Trace | None]:
     if not pending:
         return out
     scorer = requests[0][0].scorer
-    asked = [(requests[i][2].objects, requests[i][1]) for i, _ in pending]
+    asked = [(requests[i][2].objects, requests[i][1],
+              *_noise_args(requests[i][0], requests[i][2].noise)) for i, _ in pending]
     if hasattr(scorer, "evaluate_batch"):
         answers = scorer.evaluate_batch(asked)
     else:  # a scorer of the plain protocol (evaluate and log_likelihood)
-        answers = [scorer.evaluate(objects, parent=parent) for objects, parent in asked]
+        answers = [scorer.evaluate(*request) for request in asked]
     for (i, log_prior), (stats, renders) in zip(pending, answers):
         sampler, _, proposal = requests[i]
         out[i] = sampler.scored(proposal, log_prior, stats, renders)
     return out
 
 
+def _noise_args(sampler: Sampler, noise) -> tuple:
+    """What a scorer is passed beyond the objects and the parent: the noise values, where
+    the model has latent lighting (their render group lights the hypothesis) or the scorer
+    has per-pixel likelihoods (scored at them, ``sppl.robust``); nothing otherwise, so that
+    a scorer of the plain protocol (objects, parent) still serves."""
+    if sampler.model.render.latent or getattr(sampler.scorer, "per_pixel", None):
+        return (noise,)
+    return ()
+
+
 class Sampler:
     """Advances one chain. ``scorer`` renders and scores; ``rng`` is the chain's only randomness."""
 
     def __init__(self, model: Model, scorer, rng: np.random.Generator) -> None:
-        self.model = model
+        # A `region cameras` becomes the ground the scorer's cameras see (sppl.region).
+        self.model = model = bind_region(model, getattr(scorer, "cameras", {}).values())
         self.scorer = scorer
         self.rng = rng
         self.stats = MoveStats()
@@ -114,8 +127,8 @@ class Sampler:
         """The thesis's starting point: the given objects (default: an empty scene) and noise
         parameters drawn from their priors."""
         noise = {
-            kind: {p.name: p.prior.sample(self.rng) for p in sensor.noise}
-            for kind, sensor in self.model.sensors.items()
+            kind: {p.name: p.prior.sample(self.rng) for p in parameters}
+            for kind, parameters in self.model.noise_groups
         }
         if not objects and any(c.count for c in self.model.classes):
             # A class with a fixed count gives the empty scene no prior density: start from a
@@ -126,7 +139,7 @@ class Sampler:
         return self.make_trace(tuple(objects), noise)
 
     def make_trace(self, objects, noise) -> Trace:
-        stats, renders = self.scorer.evaluate(objects, noise=noise)
+        stats, renders = self.scorer.evaluate(objects, None, *_noise_args(self, noise))
         log_prior = objects_log_prior(self.model, objects) + noise_log_prior(self.model, noise)
         return Trace(
             self.model, tuple(objects), noise, stats, log_prior,
@@ -143,7 +156,8 @@ class Sampler:
             stats, renders = self.rescored(trace, proposal)
         else:
             # Given the current trace, the scorer re-renders only what the move changed.
-            stats, renders = self.scorer.evaluate(proposal.objects, parent=trace)
+            stats, renders = self.scorer.evaluate(proposal.objects, trace,
+                                                  *_noise_args(self, proposal.noise))
         return self.scored(proposal, log_prior, stats, renders)
 
     def rescored(self, trace: Trace, proposal: moves.Proposal):
@@ -279,8 +293,8 @@ class Sampler:
                 trace = yield from self._parameter_step(trace, k, block)
         if rng.random() < m.inference.p_jump:
             trace = yield from self.decide(trace, self.propose_jump(trace))
-        for kind, sensor in m.sensors.items():
-            for p in sensor.noise:
+        for kind, parameters in m.noise_groups:
+            for p in parameters:
                 trace = yield from self._noise_step(trace, kind, p.name)
         self.warmup.sweep += 1
         return trace
@@ -294,8 +308,8 @@ class Sampler:
         Keep it the mirror image of ``sweep_steps``.
         """
         m, rng = self.model, self.rng
-        for kind, sensor in reversed(list(m.sensors.items())):
-            for p in reversed(sensor.noise):
+        for kind, parameters in reversed(m.noise_groups):
+            for p in reversed(parameters):
                 trace = yield from self._noise_step(trace, kind, p.name)
         if rng.random() < m.inference.p_jump:
             trace = yield from self.decide(trace, self.propose_jump(trace))

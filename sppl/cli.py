@@ -360,6 +360,7 @@ def _check_seed(seed: int | None) -> None:
 
 def cmd_check(args) -> int:
     from .lang import load_model
+    from .region import region_text
 
     model = load_model(args.model)
     print(f"{args.model}: {len(model.classes)} classes, sensors: {', '.join(model.sensors) or 'none'}")
@@ -378,10 +379,16 @@ def cmd_check(args) -> int:
                             for k, v in s.options.items())
         options = f"({options})" if options else ""
         print(f"sensor {kind}: likelihood {s.likelihood}{options}; {noise}")
+    if model.render.latent:
+        print("render: " + ", ".join(f"{p.name} ~ {p.prior}" for p in model.render.latent))
+    if model.render.shadows:
+        print("render: parts cast shadows")
     if model.no_overlap:
         print("constraint: no two footprints overlap")
     if model.max_objects is not None:
         print(f"constraint: at most {model.max_objects} objects in all")
+    if model.region is not None:
+        print(f"region: {region_text(model)}")
     if model.static_parts:
         print(f"static scene: {len(model.static_parts)} fixed parts")
     return 0
@@ -424,6 +431,9 @@ def cmd_simulate(args) -> int:
     if args.scene:
         objects, noise = load_scene(model, args.scene)
         noise = noise or sample_noise(model, rng)
+        if any(group not in noise for group, _ in model.noise_groups):
+            # A scene that gives the sensors' noise but not the lighting: draw what is missing.
+            noise = {**sample_noise(model, rng), **noise}
     else:
         objects = sample_objects(model, rng, progress=_still_drawing)
         noise = sample_noise(model, rng)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Collection, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -137,6 +137,8 @@ class ObjectClass:
     # Of those, the ones carried scaled: {other class: {parameter here: factor}}, where the
     # value here is the factor times the value there (sppl.moves.carried_scales).
     correspondence_scales: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+    # The model's region restricting the position prior (``sppl.region.Restriction``), if any.
+    restriction: Any = None
 
     def parameter(self, name: str) -> Parameter | None:
         for p in self.parameters:
@@ -154,10 +156,16 @@ class ObjectClass:
         """Values drawn from the prior; those in ``given`` are kept and the others drawn
         conditionally on them. ``parameters`` is in dependency order, so each prior's
         arguments are known when it is drawn."""
-        values = dict(given or {})
+        given = given or {}
+        values = dict(given)
+        r = self.restriction
         for p in self.parameters:
-            if p.name not in values:
+            if p.name not in values and (r is None or p.name not in r.names):
                 values[p.name] = p.sample(rng, values)
+        if r is not None:
+            # Nothing depends on the position (``position``), so it may come last: a draw of
+            # the prior restricted to the region, given a coordinate ``given`` fixes.
+            r.sample(rng, values, given)
         return values
 
     def log_prior(self, values: Values, only: Collection[str] | None = None) -> float:
@@ -169,7 +177,9 @@ class ObjectClass:
                 continue
             total += p.log_prob(values[p.name], values)
             if total == -math.inf:
-                break  # a dependent prior must not see values outside their domains
+                return total  # a dependent prior must not see values outside their domains
+        if self.restriction is not None:
+            total += self.restriction.log_correction(values, only)
         return total
 
     def sample_count(self, rng: np.random.Generator) -> int:
@@ -232,12 +242,64 @@ class InferenceSettings:
     tries: int = 1
 
 
+# The render block's parameters a model may leave uncertain, each a latent choice with a prior
+# (``ambient : unit ~ beta(4, 6)``), and the domain each must have.
+LIGHTING = ("ambient", "intensity", "azimuth", "elevation", "gain", "red", "blue")
+RENDER_GROUP = "render"  # the name under which a trace keeps their values, beside the sensors'
+
+
 @dataclass(frozen=True)
 class RenderSettings:
+    """How a hypothesis is drawn. A part of colour c, lit at a surface whose normal makes the
+    lambert term lambert with the light, shows
+
+        balance * gain * c * (ambient + intensity * (1 - ambient) * lambert * lit)
+
+    where lit is 0 in the shadow of another part (``shadows``) and 1 elsewhere, and balance is
+    the white balance (red, 1, blue); the background shows balance * gain * background."""
+
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
     ambient: float = 0.35
     # Direction *towards* the light, in world coordinates.
     light: tuple[float, float, float] = (0.4, -0.3, 1.0)
+    intensity: float = 1.0
+    gain: float = 1.0
+    red: float = 1.0
+    blue: float = 1.0
+    # Whether parts cast shadows from the light (on the ground and on one another).
+    shadows: bool = False
+    # The lighting parameters the model leaves uncertain, with their priors (LIGHTING).
+    latent: tuple[Parameter, ...] = ()
+
+    def with_values(self, values: Mapping[str, float] | None) -> RenderSettings:
+        """These settings with the latent parameters at the given values. ``azimuth`` and
+        ``elevation`` (radians; azimuth from +x towards +y, elevation above the ground) set
+        the light's direction, each of the two not given taken from ``light``."""
+        if not values:
+            return self
+        changes = {k: float(v) for k, v in values.items() if k not in ("azimuth", "elevation")}
+        if "azimuth" in values or "elevation" in values:
+            x, y, z = np.asarray(self.light, dtype=float) / np.linalg.norm(self.light)
+            azimuth = float(values.get("azimuth", math.atan2(y, x)))
+            elevation = float(values.get("elevation", math.asin(max(-1.0, min(1.0, z)))))
+            changes["light"] = (math.cos(elevation) * math.cos(azimuth),
+                                math.cos(elevation) * math.sin(azimuth), math.sin(elevation))
+        return replace(self, **changes)
+
+    @property
+    def direction(self) -> tuple[float, float, float]:
+        """The unit vector towards the light."""
+        light = np.asarray(self.light, dtype=float)
+        return tuple(float(x) for x in light / np.linalg.norm(light))
+
+    @property
+    def balance(self) -> tuple[float, float, float]:
+        """What each channel of the image is multiplied by: gain times the white balance."""
+        return (self.gain * self.red, self.gain, self.gain * self.blue)
+
+    def shaded(self) -> tuple:
+        """What the shaders read of these settings, for telling two apart cheaply."""
+        return (self.direction, float(self.ambient), float(self.intensity), self.balance)
 
 
 @dataclass(frozen=True, eq=False)
@@ -251,6 +313,9 @@ class Model:
     no_overlap: bool = False
     # An upper bound on the total number of objects in a scene, if any.
     max_objects: int | None = None
+    # Where objects may be (``sppl.region``): a Region the classes' positions are restricted
+    # to, or, for ``region cameras``, a CamerasRegion until the cameras are known.
+    region: Any = None
     # Fixed parts every hypothesis renders: the ground plane, a table that is always there.
     static_parts: tuple[Part, ...] = ()
     path: Path | None = None
@@ -265,6 +330,16 @@ class Model:
     @property
     def class_names(self) -> tuple[str, ...]:
         return tuple(c.name for c in self.classes)
+
+    @property
+    def noise_groups(self) -> tuple[tuple[str, tuple[Parameter, ...]], ...]:
+        """The latent parameters that are not objects', by group: each sensor's noise
+        parameters, then the render block's lighting (RENDER_GROUP) if it has any. A trace
+        keeps their values as ``noise[group][name]``."""
+        groups = tuple((kind, s.noise) for kind, s in self.sensors.items())
+        if self.render.latent:
+            groups += ((RENDER_GROUP, self.render.latent),)
+        return groups
 
 
 def uniform_categorical(values: tuple[str, ...]) -> Categorical:

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from .birth import BirthProposal
-from .model import Model, ObjectClass
+from .model import RENDER_GROUP, Model, ObjectClass
 from .trace import SceneObject, Trace, make_object
 
 JUMPS = ("birth", "death", "change", "replace", "refit", "merge", "split")
@@ -221,11 +221,14 @@ def propose_noise(
     model: Model, trace: Trace, kind: str, name: str, rng: np.random.Generator,
     factor: float = 1.0,
 ) -> Proposal:
-    """A symmetric random-walk step of one noise parameter (thesis section 4.2)."""
-    p = next(q for q in model.sensors[kind].noise if q.name == name)
+    """A symmetric random-walk step of one noise parameter (thesis section 4.2), or of one of
+    the render block's lighting parameters (``kind`` RENDER_GROUP): the same step, but a
+    "render" move, which changes the renders and so is scored by rendering again."""
+    p = next(q for k, group in model.noise_groups if k == kind for q in group if q.name == name)
     noise = {k: dict(v) for k, v in trace.noise.items()}
     noise[kind][name] = p.domain.step(noise[kind][name], p.proposal_scale * factor, rng)
-    return Proposal("noise", kind, trace.objects, noise, ())
+    move = "render" if kind == RENDER_GROUP else "noise"
+    return Proposal(move, kind, trace.objects, noise, ())
 
 
 def reverse(
@@ -285,8 +288,8 @@ def reverse(
                      - log_q_change(model, n, new.cls, old.cls, old.values)
                      + log_jacobian_change(new.cls, old.cls))
         return Proposal(proposal.move, new.cls.name, objects, after.noise, (old,), ratio)
-    if proposal.move == "noise":
-        return Proposal("noise", proposal.label, after.objects, before.noise, ())
+    if proposal.move in ("noise", "render"):
+        return Proposal(proposal.move, proposal.label, after.objects, before.noise, ())
     raise ValueError(f"no reverse for a {proposal.move!r} proposal")
 
 

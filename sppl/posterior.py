@@ -13,11 +13,13 @@ slot is empty or the object's class has no such parameter). Every variable is a 
 ``arviz_stats.summary(tree)`` takes the file as it is: a categorical one (``object_class``, a
 colour) is an integer code, -1 in an empty slot, with its labels as a coordinate (``class``,
 ``<name>_label``) and the CF attributes ``flag_values`` and ``flag_meanings``. ``draw`` is the
-sweep number of each draw, the same in every chain. Slots are ordered by class (the model's
+sweep number of each draw, the same in every chain. Where the samples mark which objects some
+camera sees (``sppl.seen``), ``seen`` (1 or 0) is that mark per slot, and ``n_seen`` and
+``count_seen`` (per class) are the numbers seen. Slots are ordered by class (the model's
 order), then x, then y. The order of objects means nothing (the scene is a set; slot 0 in one
 draw need not be the same object as slot 0 in the next), so R-hat and ESS are computed only for
 *label-invariant* quantities: the number of objects, the number of each class, the log joint,
-the log likelihood and the noise scales.
+the number seen, the log likelihood and the noise scales.
 """
 
 from __future__ import annotations
@@ -177,6 +179,11 @@ def posterior_arrays(run: RunFiles, burn: int | None = None) -> Posterior:
         for name, cat in params.items()
     }
     noise = {n: np.full(shape, np.nan) for n in noise_names}
+    # Which objects some camera sees (sppl.seen), where every sample marks them.
+    marked = all("seen" in o for k in per_chain for s in k for o in s["objects"])
+    seen = np.zeros(slots, dtype=bool)
+    n_seen = np.zeros(shape, dtype=np.int64)
+    count_seen = np.zeros((*shape, len(classes)), dtype=np.int64)
     lp, loglik, step = np.zeros(shape), np.zeros(shape), np.zeros(shape, dtype=np.int64)
     key = _slot_key(class_index)
     for c, k in enumerate(per_chain):
@@ -193,18 +200,27 @@ def posterior_arrays(run: RunFiles, burn: int | None = None) -> Posterior:
                 object_class[c, d, j] = o["class"]
                 if o["class"] in class_index:
                     count[c, d, class_index[o["class"]]] += 1
+                if marked and o["seen"]:
+                    seen[c, d, j] = True
+                    n_seen[c, d] += 1
+                    if o["class"] in class_index:
+                        count_seen[c, d, class_index[o["class"]]] += 1
                 for name, v in o["params"].items():
                     values[name][c, d, j] = v
     for name, cat in params.items():
         if cat:
             width = max([1, *(len(v) for v in values[name].ravel())])
             values[name] = values[name].astype(f"<U{width}")
-    reserved = {"n_objects", "count", "exists", "object_class", *noise_names}
+    reserved = {"n_objects", "count", "exists", "object_class", "seen", "n_seen", "count_seen",
+                *noise_names}
     variables: dict[str, np.ndarray] = {
         "n_objects": n_objects, "count": count, **noise, "exists": exists,
         "object_class": object_class,
     }
     dims = {"count": ["class"], "exists": ["slot"], "object_class": ["slot"]}
+    if marked:
+        variables.update(n_seen=n_seen, count_seen=count_seen, seen=seen)
+        dims.update(count_seen=["class"], seen=["slot"])
     for name, arr in values.items():
         var = f"param_{name}" if name in reserved else name
         variables[var] = arr
@@ -264,6 +280,9 @@ def to_datatree(post: Posterior):
     variables = dict(post.variables)
     flags: dict[str, tuple[list[int], list[str]]] = {"exists": ([0, 1], ["empty", "object"])}
     variables["exists"] = variables["exists"].astype(np.int8)
+    if "seen" in variables:
+        flags["seen"] = ([0, 1], ["unseen", "seen"])
+        variables["seen"] = variables["seen"].astype(np.int8)
     for name, values in post.variables.items():
         if values.dtype.kind != "U":
             continue
@@ -335,6 +354,8 @@ def invariant_quantities(post: Posterior) -> dict[str, np.ndarray]:
     out = {"n_objects": post.variables["n_objects"].astype(float)}
     for i, c in enumerate(post.class_names):
         out[f"count[{c}]"] = post.variables["count"][..., i].astype(float)
+    if "n_seen" in post.variables:
+        out["n_seen"] = post.variables["n_seen"].astype(float)
     out["log joint"] = post.stats["lp"]
     out["log likelihood"] = post.stats["log_likelihood"]
     for n in post.noise_names:

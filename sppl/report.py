@@ -37,6 +37,7 @@ import numpy as np
 
 from .compare import compare_scenes, match_objects
 from .errors import RenderError, SpplError
+from .model import RENDER_GROUP
 from .posterior import RunFiles, diagnostics, kept_samples, load_run, posterior_arrays
 
 MATCH_RADIUS = 0.5  # metres: a sample's object is "the same" as a MAP object within this
@@ -106,18 +107,20 @@ def _xy(model, o: dict[str, Any]) -> np.ndarray:
 # Figures
 
 
-def camera_figures(model, obs, map_objects, folder: Path) -> list[Figure]:
-    """Per camera: observation, MAP render and residual, a row for each modality it has."""
+def camera_figures(model, obs, map_objects, folder: Path, map_noise=None) -> list[Figure]:
+    """Per camera: observation, MAP render and residual, a row for each modality it has; lit
+    by the MAP's lighting (``map_noise``'s render group) where the model leaves it latent."""
     from .render import Renderer
     from .simulate import objects_from_dict
 
     objects = objects_from_dict(model, {"objects": map_objects}, "MAP scene")
     parts = [*model.static_parts, *(p for o in objects for p in o.parts)]
     renderer = Renderer(model.render)
+    settings = model.render.with_values((map_noise or {}).get(RENDER_GROUP))
     figures = []
     try:
         for frame in obs.frames:
-            rgb, depth = renderer.render(parts, frame.camera)
+            rgb, depth = renderer.render(parts, frame.camera, settings)
             rows = [m for m in ("rgb", "depth") if getattr(frame, m) is not None]
             fig = _figure(9.0, 2.9 * len(rows))
             axes = fig.subplots(len(rows), 3, squeeze=False)
@@ -511,7 +514,7 @@ def _acceptance_table(summary: dict[str, Any]) -> dict[str, dict[str, tuple[int,
         row[label or "-"] = (c["proposed"], c["accepted"])
         n, a = row.get("all", (0, 0))
         row["all"] = (n + c["proposed"], a + c["accepted"])
-    order = ["birth", "death", "change", "parameters", "noise"]
+    order = ["birth", "death", "change", "parameters", "noise", "render"]
     return dict(sorted(table.items(), key=lambda kv: (order.index(kv[0]) if kv[0] in order else 99,
                                                        kv[0])))
 
@@ -747,6 +750,28 @@ def load_truth(truth: Path | bool | None, obs_root: Path) -> list[dict[str, Any]
         raise SpplError(f"{path}: not a scene file ({{\"objects\": [...]}})") from None
 
 
+def seen_html(summary: dict[str, Any]) -> str:
+    """The posterior over the number of objects some camera sees, in all and per class, as a
+    table, with the unseen objects the prior adds (``sppl.seen``); "" without seen marks."""
+    if "n_seen" not in summary:
+        return ""
+    rows = {"all classes": summary["n_seen"], **summary["seen_class_counts"]}
+    ks = sorted({int(k) for d in rows.values() for k in d})
+    head = "".join(f"<th>{k}</th>" for k in ks)
+    body = "".join(
+        f"<tr><td>{html.escape(name)}</td>"
+        + "".join(f"<td>{d.get(str(k), 0.0):.2f}</td>" for k in ks) + "</tr>"
+        for name, d in rows.items())
+    u = summary["unseen"]
+    return (
+        "<h2>What the cameras see</h2><p class='note'>Posterior probability of the number of "
+        "objects that some camera sees (at least one pixel, after occlusion). Objects no "
+        "camera sees are the prior's alone: the prior adds "
+        f"{u['mean']:.2f} of them on average (none in {u['p_none']:.0%} of samples).</p>"
+        f"<table><tr><th>objects seen</th>{head}</tr>{body}</table>"
+    )
+
+
 def write_report(
     run_folder: str | Path,
     *,
@@ -786,7 +811,8 @@ def write_report(
     sections.append("<h2>The scene in 3D: the MAP and posterior samples</h2>"
                     + _explain("view") + view_html(view, folder))
     try:
-        cams = camera_figures(model, obs, map_objects, folder)
+        cams = camera_figures(model, obs, map_objects, folder,
+                              (summary.get("map") or {}).get("noise"))
         cam_html = "".join(_figure_html(f) for f in cams)
         predictive = predictive_figures(model, obs, samples, folder)
         predictive_html = "".join(_figure_html(f) for f in predictive)
@@ -796,6 +822,7 @@ def write_report(
                     f"{cam_html}")
     sections.append("<h2>Posterior predictive: simulated observations beside the real "
                     f"ones</h2>{_explain('predictive')}{predictive_html}")
+    sections.append(seen_html(summary))
     sections.append("<h2>The posterior over counts</h2>" + _explain("counts")
                     + _figure_html(counts_figure(post, true_objects, folder)))
     sections.append("<h2>Occupancy</h2>" + _figure_html(

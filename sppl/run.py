@@ -31,6 +31,7 @@ from .model import Model
 from .observations import Observations
 from .samples import SampleWriter, format_summary, read_samples, summarise, truncate_samples
 from .scoring import Scorer
+from .seen import SeenCache
 from .warmup import warmup_sweeps
 
 
@@ -168,6 +169,8 @@ class ChainRun:
         rng = np.random.default_rng(seed_sequence)
         self.seed = _seed_record(seed)
         self.sampler = sampler = Sampler(model, scorer, rng)
+        # Which objects some camera sees, worked out for the samples written (sppl.seen).
+        self.seen = SeenCache(model, observations.cameras)
         # The warm-up's sweeps (adaptation, annealing) never count as samples of the posterior.
         burn_option, burn = burn, steps // 2 if burn is None else burn
         self.burn = max(burn, warmup_sweeps(model.inference))
@@ -215,7 +218,7 @@ class ChainRun:
         if trace.score > self.best.score:
             self.best, self.best_step = trace, step
         if step % self.thin == 0:
-            self.writer.write(step, trace)
+            self.writer.write(step, trace, self.seen(trace.objects))
         return self.callback is not None and bool(
             self.callback(step, trace, self.best, self.sampler))
 
@@ -235,13 +238,15 @@ class ChainRun:
 
     def close(self) -> None:
         self.writer.close()
+        self.seen.release()
 
     def finish(self, interrupted: bool) -> RunResult:
         """The chain's summary (``summary.json``, ``summary.txt``) of what it wrote."""
         model, done, seconds = self.model, self.done, self.seconds()
         best = self.sampler.prune(self.best)
         map_sample = {"step": self.best_step, "score": best.score,
-                      "log_likelihood": best.log_likelihood, **best.as_dict()}
+                      "log_likelihood": best.log_likelihood,
+                      **best.as_dict(self.seen(best.objects, keep=False))}
         burn = self.burn
         summary = summarise(
             read_samples(self.out / "samples.jsonl"),

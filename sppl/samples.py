@@ -5,8 +5,9 @@ handed to the operating system as soon as it is written: a run killed at any mom
 SIGKILL) loses at most the sweep it was drawing, and leaves a file whose complete lines are all
 valid samples (a torn last line is skipped on reading). ``sync`` also forces them to the disk,
 which a checkpoint does first, so that a power cut loses nothing before the last checkpoint. ``summary.json`` holds what a user
-asks first: the MAP scene, the posterior over the number of objects and over classes, the
-acceptance rate per move type, and the noise scales.
+asks first: the posterior over the number of objects some camera sees (each sample's objects
+are marked seen or not), the MAP scene, the posterior over the number of objects and over
+classes, the acceptance rate per move type, and the noise scales.
 """
 
 from __future__ import annotations
@@ -36,12 +37,13 @@ class SampleWriter:
         self.file = open(path, "a", encoding="utf-8")  # noqa: SIM115 (closed in close())
         self.last_step = 0  # the step of the last sample handed to the operating system
 
-    def write(self, step: int, trace: Trace) -> None:
+    def write(self, step: int, trace: Trace, seen: list[bool] | None = None) -> None:
+        """One sample; ``seen`` marks which of its objects some camera sees."""
         record = {
             "step": step,
             "score": trace.score,
             "log_likelihood": trace.log_likelihood,
-            **trace.as_dict(),
+            **trace.as_dict(seen),
         }
         self.file.write(json.dumps(record) + "\n")
         self.file.flush()
@@ -111,6 +113,7 @@ def summarise(
         for c in class_names
     }
     configs = Counter(_class_key(s["objects"]) for s in kept)
+    seen = seen_summary(kept, class_names)
     noise: dict[str, dict[str, dict[str, float]]] = {}
     for s in kept:
         for kind, params in s["noise"].items():
@@ -132,6 +135,7 @@ def summarise(
         "samples_used": n,
         "burn": burn,
         "map": map_sample,
+        **seen,
         "n_objects": {str(k): v / n for k, v in sorted(count_post.items())} if n else {},
         "class_counts": {c: {str(k): v / n for k, v in d.items()} for c, d in per_class.items()},
         "class_sets": {k: v / n for k, v in configs.most_common(10)} if n else {},
@@ -145,6 +149,32 @@ def summarise(
     }
 
 
+def seen_summary(kept: list[dict[str, Any]], class_names: Iterable[str]) -> dict[str, Any]:
+    """The posterior over the number of objects some camera sees, in all and per class, and
+    the mean number no camera sees, from samples whose objects are marked (``sppl.seen``);
+    empty where any sample is not marked (samples of an older sppl)."""
+    if not kept or any("seen" not in o for s in kept for o in s["objects"]):
+        return {}
+    n = len(kept)
+    n_seen = Counter(sum(o["seen"] for o in s["objects"]) for s in kept)
+    per_class = {
+        c: Counter(sum(o["seen"] and o["class"] == c for o in s["objects"]) for s in kept)
+        for c in class_names
+    }
+    unseen = [sum(not o["seen"] for o in s["objects"]) for s in kept]
+    return {
+        "n_seen": {str(k): v / n for k, v in sorted(n_seen.items())},
+        "seen_class_counts": {c: {str(k): v / n for k, v in sorted(d.items())}
+                              for c, d in per_class.items()},
+        "unseen": {"mean": float(np.mean(unseen)),
+                   "p_none": sum(u == 0 for u in unseen) / n},
+    }
+
+
+def _shares(d: dict[str, float], sep: str = ", ") -> str:
+    return sep.join(f"{k}: {v:.2f}" for k, v in d.items())
+
+
 def format_summary(summary: dict[str, Any]) -> str:
     """The summary as a few lines of text for the terminal."""
     lines = []
@@ -156,6 +186,14 @@ def format_summary(summary: dict[str, Any]) -> str:
     else:
         lines.append(f"{summary.get('steps_done')} steps in {summary.get('seconds', 0):.1f} s")
     lines.append(f"samples used: {summary['samples_used']} (after {summary['burn']} burn-in steps)")
+    if "n_seen" in summary:
+        # What the observations settle first: objects no camera sees are the prior's alone.
+        lines.append("objects the cameras see: " + _shares(summary["n_seen"]))
+        for c, d in summary["seen_class_counts"].items():
+            lines.append(f"  {c}: " + _shares(d))
+        u = summary["unseen"]
+        lines.append(f"unseen objects the prior adds: {u['mean']:.2f} on average "
+                     f"(none in {u['p_none']:.0%} of samples)")
     m = summary.get("map")
     if m:
         where = f"chain {m['chain']}, step {m['step']}" if "chain" in m else f"step {m['step']}"
@@ -164,15 +202,14 @@ def format_summary(summary: dict[str, Any]) -> str:
             params = ", ".join(
                 f"{k}={v:.3f}" if isinstance(v, float) else f"{k}={v}" for k, v in o["params"].items()
             )
-            lines.append(f"  {o['class']}: {params}")
+            unseen = "  (no camera sees it)" if o.get("seen") is False else ""
+            lines.append(f"  {o['class']}: {params}{unseen}")
         if not m["objects"]:
             lines.append("  (no objects)")
-    lines.append(
-        "number of objects: "
-        + ", ".join(f"{k}: {v:.2f}" for k, v in summary["n_objects"].items())
-    )
+    seen_too = " (seen or not)" if "n_seen" in summary else ""
+    lines.append(f"number of objects{seen_too}: " + _shares(summary["n_objects"]))
     for c, d in summary["class_counts"].items():
-        lines.append(f"  {c}: " + ", ".join(f"{k}: {v:.2f}" for k, v in d.items()))
+        lines.append(f"  {c}: " + _shares(d))
     lines.append("classes: " + "; ".join(f"{k}: {v:.2f}" for k, v in summary["class_sets"].items()))
     lines.append(
         "acceptance: "

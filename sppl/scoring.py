@@ -26,9 +26,10 @@ import numpy as np
 from .camera import Camera
 from .errors import ObservationError, SpplError
 from .likelihoods import Likelihood, get_likelihood, gpu_statistics
-from .model import Model
+from .model import RENDER_GROUP, Model, RenderSettings
 from .observations import Observations
-from .render.bounds import CameraBounds, union
+from .render.bounds import CameraBounds, union, world_corners
+from .render.lighting import block, caster_rows, shadow_corners
 
 log = logging.getLogger(__name__)
 
@@ -98,10 +99,12 @@ class ReferenceScorer:
     def evaluate(self, objects, parent=None, noise=None):
         """Render the objects for every camera; return the likelihood statistics of every term
         and the renders, as (stats, {frame: (rgb, depth)}). ``parent``, the trace the objects
-        were proposed from, lets a fast scorer work incrementally; this one ignores it. The
-        per-pixel likelihoods are scored at ``noise``, by default the parent's."""
+        were proposed from, lets a fast scorer work incrementally; this one ignores it.
+        ``noise``, the trace's noise values (by default the parent's), gives the lighting where
+        the model leaves it latent (its RENDER_GROUP; without it, the model's fixed settings)
+        and the values the per-pixel likelihoods are scored at."""
         noise = self._noise(parent, noise)
-        rendered = self.render(self.parts(objects))
+        rendered = self.render(self.parts(objects), self.settings_for(noise))
         stats = {(t.frame, t.kind): self.term_statistics(t, self.rendered(rendered, t), noise)
                  for t in self.terms}
         return stats, rendered
@@ -122,9 +125,17 @@ class ReferenceScorer:
         return noise
 
     def evaluate_batch(self, requests):
-        """``evaluate`` of several (objects, parent) pairs, in order. This path renders one
-        hypothesis at a time; ``Scorer`` draws them together where it can."""
-        return [self.evaluate(objects, parent=parent) for objects, parent in requests]
+        """``evaluate`` of several (objects, parent) or (objects, parent, noise) requests, in
+        order. This path renders one hypothesis at a time; ``Scorer`` draws them together
+        where it can."""
+        return [self.evaluate(*request) for request in requests]
+
+    def settings_for(self, noise) -> RenderSettings:
+        """The render settings of a hypothesis with these noise values: the model's, with
+        its latent lighting parameters at the values ``noise`` holds for them."""
+        if not noise or RENDER_GROUP not in noise:
+            return self.model.render
+        return self.model.render.with_values(noise[RENDER_GROUP])
 
     def statistics(self, objects, noise=None) -> dict[tuple[int, str], np.ndarray]:
         return self.evaluate(objects, noise=noise)[0]
@@ -146,9 +157,13 @@ class ReferenceScorer:
         """What a hypothesis draws: the static scenery, then each object's parts in order."""
         return [*self.model.static_parts, *(p for o in objects for p in o.parts)]
 
-    def render(self, parts) -> dict[int, tuple[np.ndarray, np.ndarray]]:
-        """{frame: (rgb, depth)} of these parts for every camera that has a term."""
-        return {f: self.renderer.render(parts, cam) for f, cam in self.cameras.items()}
+    def render(self, parts, settings: RenderSettings | None = None
+               ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """{frame: (rgb, depth)} of these parts for every camera that has a term, lit as
+        ``settings`` say (default: the renderer's)."""
+        if settings is None or settings is self.model.render:
+            return {f: self.renderer.render(parts, cam) for f, cam in self.cameras.items()}
+        return {f: self.renderer.render(parts, cam, settings) for f, cam in self.cameras.items()}
 
     def rendered(self, renders, term: Term) -> np.ndarray:
         """The rendered array a term compares with its observation."""
@@ -162,6 +177,13 @@ class ReferenceScorer:
         )
 
 
+def _empty_image(observed: np.ndarray, background: np.ndarray) -> float:
+    """The sum of squared residuals of an image against the empty scene's, which shows the
+    background everywhere."""
+    r = (observed - background).astype(np.float64)
+    return float(np.sum(r * r))
+
+
 class Renders(Mapping):
     """A hypothesis's renders, {frame: (rgb, depth)}, made the first time they are asked for.
 
@@ -170,13 +192,16 @@ class Renders(Mapping):
     fast path's record of the hypothesis's per-pixel terms, for incremental scoring.
     """
 
-    def __init__(self, scorer: ReferenceScorer, objects, pixels: _Pixels | None = None) -> None:
+    def __init__(self, scorer: ReferenceScorer, objects, pixels: _Pixels | None = None,
+                 settings: RenderSettings | None = None) -> None:
         self.scorer, self.objects, self.pixels = scorer, objects, pixels
+        self.settings = settings  # the lighting the hypothesis is drawn with (None: fixed)
         self._renders: dict | None = None
 
     def _all(self) -> dict:
         if self._renders is None:
-            self._renders = ReferenceScorer.render(self.scorer, self.scorer.parts(self.objects))
+            self._renders = ReferenceScorer.render(self.scorer, self.scorer.parts(self.objects),
+                                                   self.settings)
         return self._renders
 
     def __getitem__(self, frame):
@@ -282,8 +307,8 @@ class Scorer(ReferenceScorer):
         for t in self.terms:
             if t.kind == "image":
                 observed[t.frame][0] = t.observed
-                r = (t.observed - background).astype(np.float64)
-                self._constant[(t.frame, t.kind)] = (t.observed.size, float(np.sum(r * r)))
+                self._constant[(t.frame, t.kind)] = (t.observed.size,
+                                                     _empty_image(t.observed, background))
             else:
                 valid = np.ones(t.observed.shape, bool) if t.valid is None else t.valid
                 observed[t.frame][1] = np.where(valid, t.observed, np.nan)
@@ -296,11 +321,13 @@ class Scorer(ReferenceScorer):
         # its place, and the term (whose empty scene's log density depends on the noise).
         self._terms = [(k, 2 * c + kind, float(self._constant[k][0]), self._constant[k][1])
                        for k, (c, kind) in self._slot.items() if k[1] not in self.per_pixel]
+        # The same, per white balance: the empty scene shows the background times it.
+        self._balanced = {(1.0, 1.0, 1.0): self._terms}
         self._pixel_terms = [((t.frame, t.kind), 2 * self._slot[(t.frame, t.kind)][0]
                               + self._slot[(t.frame, t.kind)][1], t, self.per_pixel.index(t.kind))
                              for t in self.terms if t.kind in self.per_pixel]
         self._fast_at: dict[tuple, bool] = {}  # _fast's answers, by noise key
-        self._empty: dict[tuple, float] = {}  # (term key, noise key) -> the empty scene's
+        self._empty: dict[tuple, float] = {}  # (term key, noise key, balance) -> the empty scene's
         defines = {}
         for kind, name in (("image", "IMAGE_TERM"), ("depth", "DEPTH_TERM")):
             likelihood = self.likelihoods.get(kind)
@@ -314,6 +341,10 @@ class Scorer(ReferenceScorer):
         self.draws = DrawCache([CameraBounds(self.cameras[f]) for f in self.frames])
         static = model.static_parts
         self._static = [self.draws.of_parts(static)] if static else []
+        self._static_casters = caster_rows(static)
+        # Shadows reach down to the lowest surface a hypothesis has: the static parts' or an
+        # object's (``_shadow_rects``).
+        self._static_floor = float(world_corners(static)[2].min()) if static else 0.0
         self._area = sum(c.width * c.height for c in self.cameras.values())
         self._token = object()
 
@@ -328,14 +359,15 @@ class Scorer(ReferenceScorer):
                 or self.evaluate_many([objects], [noise])[0])
 
     def evaluate_batch(self, requests):
-        """``evaluate`` of several (objects, parent) pairs, in order, with the same results:
-        each that its parent can score incrementally is scored so (its regions are rendered
-        on their own), and all the others are drawn together before one read-back."""
+        """``evaluate`` of several (objects, parent) or (objects, parent, noise) requests, in
+        order, with the same results: each that its parent can score incrementally is scored
+        so (its regions are rendered on their own), and all the others are drawn together
+        before one read-back."""
         if self.pixels is None:
             return super().evaluate_batch(requests)
-        noises = [self._noise(parent, None) for _, parent in requests]
+        noises = [self._noise(r[1], r[2] if len(r) > 2 else None) for r in requests]
         out = []
-        for (objects, parent), noise in zip(requests, noises):
+        for (objects, parent, *_), noise in zip(requests, noises):
             key = self._key(noise)
             out.append(self._from_parent(objects, parent, noise, key)
                        if self._fast(noise, key) else None)
@@ -348,7 +380,8 @@ class Scorer(ReferenceScorer):
 
     def rescore(self, trace, noise):
         """``ReferenceScorer.rescore`` on the GL side: the terms pass run again over the
-        whole hypothesis at the new noise values (the Gaussian terms' statistics stand)."""
+        whole hypothesis at the new noise values, lit as the trace is (a noise move leaves
+        the lighting; the Gaussian terms' statistics stand)."""
         if (self.pixels is None or all(trace.noise[k] == noise[k] for k in self.per_pixel)
                 or not self._fast(noise, self._key(noise))):
             return super().rescore(trace, noise)
@@ -358,22 +391,27 @@ class Scorer(ReferenceScorer):
 
     def _from_parent(self, objects, parent, noise, key):
         """``evaluate``'s answer scored incrementally from the parent trace, or None where
-        there is no parent of this scorer's, its terms are at other noise values, or a full
-        render is cheaper."""
+        there is no parent of this scorer's, its terms are at other noise values, the lighting
+        differs from the parent's (a lighting move changes every pixel) or a full render is
+        cheaper."""
         before = getattr(parent, "renders", None)
         if isinstance(before, Renders) and before.scorer is self and before.pixels is not None:
             if before.pixels.key != key:
                 return None
+            settings = self.settings_for(noise)
+            if before.settings is not settings and before.settings.shaded() != settings.shaded():
+                return None
             if key is not None:
                 self._uniforms(noise, key)
-            pixels = self._incremental(parent.objects, objects, before.pixels)
+            pixels = self._incremental(parent.objects, objects, before.pixels, settings)
             if pixels is not None:
-                return self._stats(pixels.sums, noise, key), Renders(self, objects, pixels)
+                return (self._stats(pixels.sums, noise, key, settings),
+                        Renders(self, objects, pixels, settings))
         return None
 
     def evaluate_many(self, hypotheses, noises=None):
-        """``evaluate`` for several object sets, whole (no parent), each scored at its noise
-        values (needed by per-pixel likelihoods only)."""
+        """``evaluate`` for several object sets, whole (no parent), each lit and scored at its
+        noise values (default: the model's fixed lighting; per-pixel likelihoods need them)."""
         if noises is None:
             noises = [self._noise(None, None)] * len(hypotheses)
         if self.pixels is None:
@@ -389,11 +427,14 @@ class Scorer(ReferenceScorer):
             if key is not None:
                 self._uniforms(noises[i], key)
             group = hypotheses[i:j]
-            blocks, sums = self.pixels.render([self._drawn(objects) for objects in group])
-            for b, objects in enumerate(group):
+            settings = [self.settings_for(n) for n in noises[i:j]]
+            lighting = [self._lighting(objects, s) for objects, s in zip(group, settings)]
+            blocks, sums = self.pixels.render([self._drawn(objects) for objects in group],
+                                              lighting)
+            for b, (objects, s) in enumerate(zip(group, settings)):
                 flat = sums[b].ravel().tolist()
-                out.append((self._stats(flat, noises[i], key),
-                            Renders(self, objects, _Pixels(flat, blocks[b], key=key))))
+                out.append((self._stats(flat, noises[i], key, s),
+                            Renders(self, objects, _Pixels(flat, blocks[b], key=key), s)))
             i = j
         return out
 
@@ -401,14 +442,6 @@ class Scorer(ReferenceScorer):
 
     def _drawn(self, objects) -> list:
         return [*self._static, *(self.draws.of_object(o) for o in objects)]
-
-    def _stats(self, sums: list[float], noise=None, key=None) -> dict[tuple[int, str], np.ndarray]:
-        out = {term: np.array((n, max(empty + sums[i], 0.0)))
-               for term, i, n, empty in self._terms}
-        for term, i, t, k in self._pixel_terms:
-            out[term] = np.array([*key[k], self._empty_scene(term, t, noise[t.kind], key[k])
-                                  + sums[i]])
-        return out
 
     def _key(self, noise) -> tuple | None:
         """The noise values the per-pixel terms depend on (None: there are none)."""
@@ -463,25 +496,97 @@ class Scorer(ReferenceScorer):
             self.pixels.set_noise(c, uniforms)
         self._noise_key = key
 
-    def _empty_scene(self, key, term: Term, values, noise_key) -> float:
+    def _empty_scene(self, key, term: Term, values, noise_key, balance) -> float:
         """The log density of a term's observation given the empty scene, at these noise
-        values (numpy, float64; the GL-side terms are relative to it)."""
-        found = self._empty.get((key, noise_key))
+        values and white balance (numpy, float64; the GL-side terms are relative to it)."""
+        found = self._empty.get((key, noise_key, balance))
         if found is None:
             if term.kind == "image":
-                rendered = np.broadcast_to(self._background, term.observed.shape)
+                shown = (self._background * np.asarray(balance, dtype="f4")).astype("f4")
+                rendered = np.broadcast_to(shown, term.observed.shape)
             else:
                 rendered = np.full(term.observed.shape, np.float32(term.camera.depth_max))
             found = term.likelihood.log_density(term.observed, rendered, term.valid, values,
                                                 term.camera.depth_max)
             if len(self._empty) > 256:  # noise values visited long ago
                 self._empty.clear()
-            self._empty[(key, noise_key)] = found
+            self._empty[(key, noise_key, balance)] = found
         return found
 
-    def _incremental(self, old_objects, objects, before: _Pixels) -> _Pixels | None:
+    def _lighting(self, objects, settings: RenderSettings) -> bytes:
+        """The ``Lighting`` block of a hypothesis: its settings and, with shadows, every
+        part's caster rows (each object's worked out once, kept in its cache)."""
+        if not settings.shadows:
+            return block(settings)
+        rows = [self._static_casters]
+        for o in objects:
+            found = o.cache.get(caster_rows)
+            if found is None:
+                found = o.cache[caster_rows] = caster_rows(o.parts)
+            rows.append(found)
+        return block(settings, b"".join(rows))
+
+    def _stats(self, sums: list[float], noise=None, key=None,
+               settings: RenderSettings | None = None) -> dict[tuple[int, str], np.ndarray]:
+        terms, balance = self._terms, (1.0, 1.0, 1.0)
+        if settings is not None and settings.balance != balance:
+            balance = tuple(settings.balance)
+            terms = self._balanced_terms(balance)
+        out = {term: np.array((n, max(empty + sums[i], 0.0))) for term, i, n, empty in terms}
+        for term, i, t, k in self._pixel_terms:
+            out[term] = np.array([*key[k], self._empty_scene(term, t, noise[t.kind], key[k],
+                                                             balance) + sums[i]])
+        return out
+
+    def _balanced_terms(self, balance) -> list:
+        """``_terms`` with the empty scene's sums for a background shown times ``balance``
+        (a few kept: a chain's lighting moves visit a new balance at each acceptance)."""
+        found = self._balanced.get(balance)
+        if found is None:
+            if len(self._balanced) > 64:
+                self._balanced = {(1.0, 1.0, 1.0): self._terms}
+            shown = (self._background * np.asarray(balance, dtype="f4")).astype("f4")
+            by_key = {(t.frame, t.kind): t for t in self.terms}
+            found = self._balanced[balance] = [
+                (k, i, n, _empty_image(by_key[k].observed, shown) if k[1] == "image" else empty)
+                for k, i, n, empty in self._terms]
+        return found
+
+    def _shadow_rects(self, changed, objects, old_objects, settings: RenderSettings):
+        """Per camera, the rectangle of pixels the changed objects' shadows can darken, before
+        and after the move (None: none); False when no rectangle bounds them (the light at or
+        below the horizon, or a corner behind a camera), and the whole image must be drawn."""
+        corners_of = self._corners
+        floor = min(self._static_floor,
+                    *(corners_of(o)[1] for o in (*old_objects, *objects)))
+        rects = [None] * len(self.frames)
+        for o in changed:
+            volume = shadow_corners(corners_of(o)[0], settings.direction, floor)
+            if volume is None:
+                return False
+            for c, bounds in enumerate(self.draws.bounds):
+                rect = bounds.rect_of(volume)
+                if rect == bounds.full:
+                    return False
+                rects[c] = union(rects[c], rect)
+        return rects
+
+    @staticmethod
+    def _corners(obj):
+        """An object's parts' bounding-box corners (4, 8n) and their lowest height, cached."""
+        found = obj.cache.get(world_corners)
+        if found is None:
+            corners = world_corners(obj.parts) if obj.parts else np.zeros((4, 0))
+            low = float(corners[2].min()) if obj.parts else np.inf
+            found = obj.cache[world_corners] = (corners, low)
+        return found
+
+    def _incremental(self, old_objects, objects, before: _Pixels,
+                     settings: RenderSettings | None = None) -> _Pixels | None:
         """The new hypothesis's record from its parent's, re-rendering only the rectangles
-        the changed objects cover before or after; None when a full render is cheaper."""
+        the changed objects cover before or after, and with shadows the rectangles their
+        shadows can reach; None when a full render is cheaper."""
+        settings = settings or self.model.render
         if len(old_objects) == len(objects):
             # The usual move changes objects in place: those that differ, at either end.
             changed = [o for pair in zip(old_objects, objects) if pair[0] is not pair[1]
@@ -496,6 +601,11 @@ class Scorer(ReferenceScorer):
         rects = of_object(changed[0]).rects
         for o in changed[1:]:
             rects = [union(r, s) for r, s in zip(rects, of_object(o).rects)]
+        if settings.shadows:
+            shadows = self._shadow_rects(changed, objects, old_objects, settings)
+            if shadows is False:
+                return None
+            rects = [union(r, s) for r, s in zip(rects, shadows)]
         area = 0
         for r in rects:
             if r is not None:
@@ -505,7 +615,8 @@ class Scorer(ReferenceScorer):
         if area == 0:
             return before  # no camera sees the change
         blocks = before.materialise()
-        patches = self.pixels.render_regions(self._drawn(objects), rects)
+        patches = self.pixels.render_regions(self._drawn(objects), rects,
+                                             self._lighting(objects, settings))
         # The sums as plain floats: a move's few additions cost less than numpy's indexing.
         sums = list(before.sums)
         kept = []

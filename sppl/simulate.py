@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from .errors import SpplError
-from .model import MAX_SCENE_OBJECTS, Model
+from .model import MAX_SCENE_OBJECTS, RENDER_GROUP, Model
 from .observations import CameraSpec, Frame
 from .trace import SceneObject, counts_allowed, make_object, scene_is_valid
 
@@ -76,7 +76,7 @@ def fixed_objects(model: Model, rng: np.random.Generator, max_tries: int = 10_00
 
 
 def sample_noise(model: Model, rng: np.random.Generator) -> dict[str, dict[str, float]]:
-    return {k: {p.name: p.prior.sample(rng) for p in s.noise} for k, s in model.sensors.items()}
+    return {k: {p.name: p.prior.sample(rng) for p in ps} for k, ps in model.noise_groups}
 
 
 def objects_from_dict(model: Model, scene: Mapping[str, Any], where: str = "scene") -> tuple[SceneObject, ...]:
@@ -124,10 +124,12 @@ def render_observations(
     from .likelihoods import get_likelihood, sample_observation
 
     parts = [*model.static_parts, *(p for o in objects for p in o.parts)]
+    # Lit as the scene's lighting values say, where the model leaves the lighting latent.
+    lit = () if not model.render.latent else (model.render.with_values(noise[RENDER_GROUP]),)
     frames = []
     for spec in cameras:
         cam, modalities = spec.camera, spec.modalities
-        rgb, depth = renderer.render(parts, cam)
+        rgb, depth = renderer.render(parts, cam, *lit)
         frame_rgb = frame_depth = valid = None
         if "rgb" in modalities:
             s = model.sensors.get("image")

@@ -72,8 +72,11 @@ class SceneObject:
         (x0, y0), (x1, y1) = points.min(axis=0), points.max(axis=0)
         return float(x0), float(y0), float(x1), float(y1)
 
-    def as_dict(self) -> dict[str, Any]:
-        return {"class": self.cls.name, "params": {k: _plain(v) for k, v in self.values.items()}}
+    def as_dict(self, seen: bool | None = None) -> dict[str, Any]:
+        out = {"class": self.cls.name, "params": {k: _plain(v) for k, v in self.values.items()}}
+        if seen is not None:
+            out["seen"] = seen  # whether some camera sees it (sppl.seen)
+        return out
 
 
 def _plain(v: Any) -> Any:
@@ -177,15 +180,17 @@ class Trace:
                 out[("object", i, p.name)] = Choice(
                     o.values[p.name], p.log_prob(o.values[p.name], o.values)
                 )
-        for kind, sensor in self.model.sensors.items():
-            for p in sensor.noise:
+        for kind, parameters in self.model.noise_groups:
+            for p in parameters:
                 value = self.noise[kind][p.name]
                 out[("noise", kind, p.name)] = Choice(value, p.log_prob(value))
         return out
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self, seen: list[bool] | None = None) -> dict[str, Any]:
+        """The scene as plain data; ``seen``, if given, marks each object seen or not."""
+        marks = [None] * len(self.objects) if seen is None else seen
         return {
-            "objects": [o.as_dict() for o in self.objects],
+            "objects": [o.as_dict(s) for o, s in zip(self.objects, marks)],
             "noise": {k: {n: float(v) for n, v in p.items()} for k, p in self.noise.items()},
         }
 
@@ -200,7 +205,7 @@ def objects_log_prior(model: Model, objects) -> float:
 
 def noise_log_prior(model: Model, noise: Mapping[str, Mapping[str, float]]) -> float:
     total = 0.0
-    for kind, sensor in model.sensors.items():
-        for p in sensor.noise:
+    for kind, parameters in model.noise_groups:
+        for p in parameters:
             total += p.log_prob(noise[kind][p.name])
     return total

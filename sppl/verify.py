@@ -55,8 +55,9 @@ from .chain import Sampler
 from .domains import Finite, Integer
 from .errors import SpplError
 from .likelihoods import get_likelihood, sample_observation
-from .model import Model
+from .model import RENDER_GROUP, Model
 from .observations import CameraSpec, Frame, Observations
+from .region import bind_region
 from .scoring import PriorScorer, Scorer
 from .simulate import sample_noise, sample_objects
 from .trace import Trace
@@ -316,17 +317,22 @@ def with_prior_noise_steps(model: Model, *, draws: int = 2000, seed=0) -> Model:
     whatever its scale (as ``with_jumps`` says of the jump chance), so the move checked is the
     same; only its tuning differs."""
     rng = np.random.default_rng(_seq(seed))
-    sensors = {}
-    for kind, sensor in model.sensors.items():
-        noise = []
-        for p in sensor.noise:
+
+    def widened(parameters):
+        out = []
+        for p in parameters:
             if p.continuous:
                 spread = float(np.std([p.prior.sample(rng) for _ in range(draws)]))
                 if spread > p.proposal_scale:
                     p = replace(p, proposal_scale=spread)
-            noise.append(p)
-        sensors[kind] = replace(sensor, noise=tuple(noise))
-    return replace(model, sensors=sensors)
+            out.append(p)
+        return tuple(out)
+
+    sensors = {kind: replace(sensor, noise=widened(sensor.noise))
+               for kind, sensor in model.sensors.items()}
+    # The render block's lighting parameters are random walks of the same kind.
+    render = replace(model.render, latent=widened(model.render.latent))
+    return replace(model, sensors=sensors, render=render)
 
 
 # The moves without which a chain cannot reach every scene: against observations each of them
@@ -374,6 +380,7 @@ def prior_recovery(
     counts, or a prior that depends on other parameters, with ``reference_draws`` independent
     scenes drawn from the prior by ``sample_objects`` (rejection sampling where constrained).
     """
+    model = for_checks(model)
     m = with_jumps(model, p_jump)
     chain_seq, ref_seq, pick_seq = _seq(seed).spawn(3)
     rng = np.random.default_rng(chain_seq)
@@ -463,9 +470,17 @@ def prior_recovery(
             if not draws:
                 rows.append(Row("prior", name, str(par.prior), "no draws", None, False))
                 continue
-            exact = _exact_test(draws, par, pick) if independent and par.prior_fn is None else None
+            restricted = cls.restriction is not None and par.name in cls.restriction.names
+            exact = (_exact_test(draws, par, pick)
+                     if independent and par.prior_fn is None and not restricted else None)
             if exact is not None:
                 expected, p = exact
+            elif restricted and independent:
+                # The prior restricted to the region, by rejection from the unrestricted one.
+                ref = list(cls.restriction.rejection_draws(reference_draws, pick)[
+                    :, cls.restriction.names.index(par.name)])
+                expected = f"{_describe(ref, par)} (rejection, n={len(ref)})"
+                p = float(stats.ks_2samp(draws, ref).pvalue)
             else:
                 expected = f"{_describe(ref, par)} ({where_ref}, n={len(ref)})"
                 if par.continuous:
@@ -474,9 +489,9 @@ def prior_recovery(
                     p = chisquare_two_sample(draws, ref)[1]
             rows.append(Row("prior", name, expected, observed, p))
 
-    # Noise parameters: their priors are untouched by any constraint.
-    for kind, sensor in m.sensors.items():
-        for par in sensor.noise:
+    # Noise and lighting parameters: their priors are untouched by any constraint.
+    for kind, parameters in m.noise_groups:
+        for par in parameters:
             series = np.array([noise[kind][par.name] for _, noise in states])
             keep, step = thinned(series)
             if too_short(f"{kind}.{par.name}", step):
@@ -509,14 +524,20 @@ def prior_declarations(model: Model, *, draws: int = 4000, seed=0, alpha: float 
     other values), for uniformity (KS; randomised between F(x - 1) and F(x) for integers),
     and each categorical parameter's draws against its probabilities (chi-square). Priors
     without a ``cdf`` are left out."""
+    model = for_checks(model)
     rng = np.random.default_rng(_seq(seed))
     rows = []
     owners = [(cls.name, cls.parameters, lambda c=cls: c.sample_prior(rng)) for cls in model.classes]
-    owners += [(kind, s.noise, lambda s=s: {p.name: p.prior.sample(rng) for p in s.noise})
-               for kind, s in model.sensors.items()]
+    owners += [(kind, ps, lambda ps=ps: {p.name: p.prior.sample(rng) for p in ps})
+               for kind, ps in model.noise_groups]
     for owner, parameters, draw in owners:
         samples = [draw() for _ in range(draws)]
+        restricted = next((c.restriction for c in model.classes if c.name == owner), None)
+        if restricted is not None:
+            rows += _restriction_rows(owner, restricted, samples, rng)
         for par in parameters:
+            if restricted is not None and par.name in restricted.names:
+                continue  # its marginal is the restricted prior's: _restriction_rows
             name = f"{owner}.{par.name}: draws match density"
             # Where the density is zero at a draw, the prior the sampler targets (truncated
             # to the domain, renormalised per object) is not the one that births draw from.
@@ -550,6 +571,25 @@ def prior_declarations(model: Model, *, draws: int = 4000, seed=0, alpha: float 
             rows.append(Row("prior", name, "F(draw) uniform: mean 0.500, sd 0.289",
                             f"{_mean_sd(u)} (n={len(u)})", p))
     return Report(rows, alpha)
+
+
+def _restriction_rows(owner: str, r, samples, rng) -> list[Row]:
+    """A class's position draws, restricted to the model's region, against rejection sampling
+    from the unrestricted priors (KS on each coordinate), and the normaliser Z against the
+    share of those draws that land inside (binomial)."""
+    ref = r.rejection_draws(len(samples), rng)
+    rows = []
+    for i, name in enumerate(r.names):
+        draws = [v[name] for v in samples]
+        p = float(stats.ks_2samp(draws, ref[:, i]).pvalue)
+        rows.append(Row("prior", f"{owner}.{name}: draws match the region's prior",
+                        f"rejection: {_mean_sd(ref[:, i])}", _mean_sd(draws), p))
+    z, tries = math.exp(r.log_mass), 2 * len(samples)
+    inside = r.inside(tries, rng)
+    p = float(stats.binomtest(inside, tries, z).pvalue)
+    rows.append(Row("prior", f"{owner}: the region's normaliser", f"Z = {z:.4f}",
+                    f"{inside}/{tries} = {inside / tries:.4f} inside", p))
+    return rows
 
 
 def _one(values, rng):
@@ -591,6 +631,12 @@ def _exact_test(draws, par, rng) -> tuple[str, float] | None:
 # Observations for the checks that need a likelihood
 
 
+def for_checks(model: Model) -> Model:
+    """``model`` with a ``region cameras`` taken as the ground the verify cameras see (sized
+    by the unrestricted prior): the checks need a region before any observation is made."""
+    return bind_region(model, [spec.camera for spec in verify_cameras(model)])
+
+
 def verify_cameras(model: Model, size: int = 8, seed: int = 0) -> list[CameraSpec]:
     """Two tiny cameras, one RGB and one depth, looking at the region where the prior puts
     objects (90% of prior positions lie within the radius they frame)."""
@@ -628,9 +674,13 @@ class _Simulator:
         self.renderer = renderer
         self.likelihoods = {k: get_likelihood(s.likelihood, s.options) for k, s in model.sensors.items()}
 
-    def render(self, objects) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    def render(self, objects, noise=None) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """Every verify camera's render of the objects, lit as ``noise``'s render group (if
+        the model has lighting parameters) says."""
         parts = [*self.model.static_parts, *(p for o in objects for p in o.parts)]
-        return {i: self.renderer.render(parts, s.camera) for i, s in enumerate(self.specs)}
+        settings = self.model.render.with_values((noise or {}).get(RENDER_GROUP))
+        return {i: self.renderer.render(parts, s.camera, settings)
+                for i, s in enumerate(self.specs)}
 
     def observe(self, renders, noise, rng) -> Observations:
         frames = []
@@ -706,8 +756,8 @@ def scene_quantities(model: Model) -> list[Quantity]:
                 for v in par.domain.values:
                     out.append((f"{name} = {v}", lambda objs, noise, c=cls, n=par.name, v=v:
                                 float(sum(o.values[n] == v for o in objs if o.cls is c)), True))
-    for kind, sensor in model.sensors.items():
-        for par in sensor.noise:
+    for kind, parameters in model.noise_groups:
+        for par in parameters:
             out.append((f"{kind}.{par.name}", lambda objs, noise, k=kind, n=par.name:
                         float(noise[k][n]), False))
     return out
@@ -741,6 +791,7 @@ def geweke(
     tests (Kolmogorov-Smirnov, chi-square for discrete quantities), whose false-alarm rate is
     then exact. A wrong move makes the chains drift from the prior, furthest at their end.
     """
+    model = for_checks(model)
     m = with_jumps(model, p_jump)
     if not m.sensors:
         return Report([], alpha, ["geweke: the model has no sensors, so there is nothing to test."])
@@ -765,7 +816,7 @@ def geweke(
     for r, chain_seq in enumerate(sc_seq.spawn(chains)):
         rng = np.random.default_rng(chain_seq)
         objs, noise = sample_objects(m, rng), sample_noise(m, rng)
-        renders = sim.render(objs)
+        renders = sim.render(objs, noise)
         sampler = sim.sampler(sim.observe(renders, noise, rng), rng, sampler_factory, stats_,
                               warmup)
         stats_ = sampler.stats
@@ -890,6 +941,7 @@ def move_checks(
     look at what a state leaves unexplained) are among those checked; without, against no
     observations. The change-of-class pairings are checked too (``change_declarations``).
     """
+    model = for_checks(model)
     seq = _seq(seed)
     rng = np.random.default_rng(seq)
     if model.sensors and observe:
@@ -899,7 +951,7 @@ def move_checks(
             renderer = Renderer(model.render)
         sim = _Simulator(model, verify_cameras(model, size), renderer)
         objs, noise = sample_objects(model, rng), sample_noise(model, rng)
-        sampler = sim.sampler(sim.observe(sim.render(objs), noise, rng), rng, sampler_factory)
+        sampler = sim.sampler(sim.observe(sim.render(objs, noise), noise, rng), rng, sampler_factory)
     else:
         sampler = sampler_factory(model, PriorScorer(), rng)
     jumps = {j for j, p in sampler.jump.items() if p > 0}
@@ -919,8 +971,8 @@ def move_checks(
             k = int(rng.integers(len(trace.objects)))
             for block in moves.parameter_blocks(trace.objects[k].cls):
                 proposals.append(moves.propose_parameters(model, trace, k, block, rng))
-        for kind, sensor in model.sensors.items():
-            for p in sensor.noise:
+        for kind, parameters in model.noise_groups:
+            for p in parameters:
                 proposals.append(moves.propose_noise(model, trace, kind, p.name, rng))
         for p in proposals:
             if p.move in no_reverse:
@@ -1021,6 +1073,7 @@ def sbc(
     those before, ``thin`` sweeps apart. That chain is stationary, so the truth's rank is
     exactly uniform however short the chain; a wrong move breaks the uniformity.
     """
+    model = for_checks(model)
     m = with_jumps(model, p_jump)
     if renderer is None:
         from .render import Renderer
@@ -1034,7 +1087,7 @@ def sbc(
     for r, rep_seq in enumerate(replicate_seqs):
         rng = np.random.default_rng(rep_seq)
         objs, noise = sample_objects(m, rng), sample_noise(m, rng)
-        renders = sim.render(objs)
+        renders = sim.render(objs, noise)
         sampler = sim.sampler(sim.observe(renders, noise, rng), rng, sampler_factory,
                               warmup=warmup)
         truth = _trace_with(sampler, objs, noise, renders)
@@ -1089,6 +1142,7 @@ def verify_model(
     and the others still run."""
     say = progress or (lambda message: None)
     prior_seq, moves_seq, geweke_seq, proposals_seq = _seq(seed).spawn(4)
+    model = for_checks(model)  # `region cameras`: the ground the verify cameras see
     if model.sensors and renderer is None and run_geweke:
         from .render import Renderer
 

@@ -216,6 +216,12 @@ CASES = [
          lambda d: model_file(d, _depth_sensor("likelihood mixture\n    sigma : positive ~ "
                                                "gamma(2, 0.1)")),
          "needs a prior for its noise parameter `outlier`", excerpt=True),
+    Case("model-render-prior", "model: a prior on a render parameter that does not exist",
+         ["check", "model.scn"],
+         lambda d: model_file(d, "class cube {\n    count ~ poisson(1)\n    geometry box(1, 1, "
+                                 "1) colour rgb(1, 0, 0)\n}\nrender {\n    ambinet : interval(0, 1) ~ "
+                                 "beta(4, 6)\n}\n"),
+         "did you mean `ambient`", excerpt=True),
     # -- observation folders ------------------------------------------------------------------
     Case("obs-missing", "observation folder missing", SAMPLE, model_file, "not found"),
     Case("obs-empty", "observation folder empty", SAMPLE,

@@ -91,6 +91,10 @@ def test_the_top_summary_pools_the_chains(two_chains):
     assert all(f"count[{c}]" in d for c in ("cube", "cone", "sphere"))
     assert d["log joint"]["rhat"] is not None and d["log joint"]["ess_bulk"] > 0
     assert "R-hat" in (two_chains / "summary.txt").read_text()
+    # The pooled summary leads with the number of objects the cameras see.
+    assert sum(summary["n_seen"].values()) == pytest.approx(1.0) and "n_seen" in d
+    assert (two_chains / "summary.txt").read_text().splitlines()[2].startswith(
+        "objects the cameras see: ")
 
 
 def test_the_same_seed_gives_the_same_chains(two_chains, model, obs, tmp_path):
@@ -194,7 +198,8 @@ def test_the_report_has_every_section_and_its_figures(report):
 
     for heading in ("The scene in 3D", "The cameras", "Posterior predictive",
                     "The posterior over counts", "Occupancy", "Each MAP object", "Traces",
-                    "Acceptance rates", "R-hat", "The MAP scene against the truth"):
+                    "Acceptance rates", "R-hat", "The MAP scene against the truth",
+                    "What the cameras see"):
         assert heading in page, heading
     for text in EXPLAIN.values():  # every explanation, once
         assert page.count(text) == 1

@@ -236,12 +236,12 @@ from sppl.samples import SampleWriter
 model, obs, out, step, torn = sys.argv[1], sys.argv[2], Path(sys.argv[3]), int(sys.argv[4]), sys.argv[5] == "torn"
 write = SampleWriter.write
 
-def write_then_die(self, s, trace):
+def write_then_die(self, s, trace, seen=None):
     if s == step and torn:  # die half way through the sample's line
         self.file.write('{"step": ' + str(s) + ', "score": ')
         self.file.flush()
         os.kill(os.getpid(), signal.SIGKILL)
-    write(self, s, trace)
+    write(self, s, trace, seen)
     if s == step:  # die just after the sample is written
         os.kill(os.getpid(), signal.SIGKILL)
 

@@ -23,6 +23,7 @@ from sppl.errors import SpplError
 from sppl.lang import load_model
 from sppl.likelihoods import get_likelihood, gpu_statistics, register_likelihood
 from sppl.lockstep import sweep_together
+from sppl.model import RENDER_GROUP
 from sppl.observations import load_observations
 from sppl.robust import Mixture, StudentT
 from sppl.scoring import ReferenceScorer, Scorer
@@ -284,6 +285,73 @@ def test_chains_in_lockstep_each_score_at_their_own_noise(require_gl, root):
         b = [s.sweep(t) for s, t in zip(alone, b)]
         assert [t.as_dict() for t in a] == [t.as_dict() for t in b]
         assert [t.score for t in a] == pytest.approx([t.score for t in b], rel=1e-12)
+
+
+def _lit(noise, rng):
+    """Noise values with the lighting drawn afresh and the robust ones kept."""
+    out = {k: dict(v) for k, v in noise.items()}
+    out[RENDER_GROUP].update(ambient=rng.uniform(0.2, 0.6), intensity=rng.uniform(0.6, 1.4),
+                             azimuth=rng.uniform(-3, 3), elevation=rng.uniform(0.6, 1.3),
+                             gain=rng.uniform(0.8, 1.2), red=rng.uniform(0.8, 1.2),
+                             blue=rng.uniform(0.8, 1.2))
+    return out
+
+
+def test_robust_terms_under_latent_lighting_and_shadows_equal_the_reference(require_gl, root):
+    """The terms pass with both the likelihood prelude and the lighting block: whole scenes
+    under random lighting, a lighting change scored from a parent (a render move, at the
+    parent's robust noise values) and a robust noise change re-scored under a lighting that
+    is not the model's default (a noise move) are the reference's."""
+    model, renderer, obs, truth, noise = _setting(root, "lit_mixture.scn")
+    assert model.render.shadows and model.render.latent
+    fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
+    assert fast.pixels is not None and fast.per_pixel == ["depth", "image"]
+    rng = np.random.default_rng(4)
+    for seed in range(3):
+        objects = truth if seed == 0 else sample_objects(model, rng)
+        n = _lit(sample_noise(model, rng), rng)
+        _agree(fast.statistics(objects, n), ref.statistics(objects, n), ref, n)
+    sampler = Sampler(model, fast, np.random.default_rng(5))
+    trace = sampler.make_trace(truth, _lit(noise, rng))
+    lit = _lit(trace.noise, rng)  # a render move's proposal
+    _agree(fast.evaluate(truth, trace, lit)[0], ref.evaluate(truth, noise=lit)[0], ref, lit)
+    rescored = {k: dict(v) for k, v in trace.noise.items()}  # a noise move's proposal
+    rescored["image"]["outlier"] *= 0.5
+    rescored["depth"]["sigma"] *= 1.5
+    stats, _ = fast.rescore(trace, rescored)
+    _agree(stats, ref.statistics(truth, rescored), ref, rescored)
+    stats, _ = ref.rescore(trace, rescored)
+    _agree(stats, ref.statistics(truth, rescored), ref, rescored)
+
+
+def test_a_chain_with_robust_likelihoods_and_latent_lighting_agrees_on_both_paths(
+        require_gl, root, monkeypatch):
+    """A few sweeps on each scorer: every proposal scored (object moves from their parent,
+    render moves re-rendered at the current robust noise values, noise moves re-scored under
+    the current lighting) and every state kept is the reference's, and the same on the fast
+    path, at its noise values and lighting."""
+    model, renderer, obs, truth, noise = _setting(root, "lit_mixture.scn")
+    fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
+    scored = {"parameters": 0, "noise": 0, "render": 0}
+    evaluate = Sampler.evaluate
+
+    def checked(self, trace, proposal):
+        new = evaluate(self, trace, proposal)
+        if new is not None:
+            scored[proposal.move] = scored.get(proposal.move, 0) + 1
+            _agree(new.stats, ref.statistics(new.objects, new.noise), ref, new.noise)
+            _agree(fast.statistics(new.objects, new.noise), new.stats, ref, new.noise)
+        return new
+
+    monkeypatch.setattr(Sampler, "evaluate", checked)
+    for scorer in (fast, ref):
+        sampler = Sampler(model, scorer, np.random.default_rng(12))
+        trace = sampler.make_trace(truth, _lit(noise, np.random.default_rng(13)))
+        for _ in range(2):
+            trace = sampler.sweep(trace)
+            _agree(trace.stats, ref.statistics(trace.objects, trace.noise), ref, trace.noise)
+            assert math.isfinite(trace.score)
+    assert scored["parameters"] > 0 and scored["noise"] > 0 and scored["render"] > 0
 
 
 def test_noise_values_the_gl_side_cannot_hold_go_to_the_reference(require_gl, root):

@@ -238,6 +238,15 @@ class Constraint:
 
 
 @dataclass(frozen=True)
+class Region:
+    """``region box(...)``, ``region polygon(...)`` or ``region cameras[(names)]``."""
+
+    kind: Ident
+    args: tuple  # expressions, tuples and strings; () when written without parentheses
+    span: Span
+
+
+@dataclass(frozen=True)
 class Setting:
     """``key = value``: in a ``render``, ``inference`` or ``sensor`` block, or ``jump_weights``."""
 
@@ -263,7 +272,9 @@ class Sensor:
 
 @dataclass(frozen=True)
 class Render:
-    settings: tuple[Setting, ...]
+    """``render { ... }``: settings, and choices of the latent lighting parameters."""
+
+    settings: tuple[Setting | Choice, ...]
     span: Span
 
 

@@ -24,7 +24,9 @@ from ..domains import Finite, Interval, Periodic, Positive, Real
 from ..errors import ModelError, ModelErrors, Span, SpplError
 from ..geometry import Part
 from ..model import (
+    LIGHTING,
     MAX_SCENE_OBJECTS,
+    RENDER_GROUP,
     SCENE_TAIL,
     InferenceSettings,
     Model,
@@ -80,7 +82,9 @@ def compile_model(text: str, path: str | Path = DEFAULT_PATH) -> Model:
 
 _CONSTRAINTS = ("no_overlap", "max_objects")
 _SENSOR_KINDS = ("image", "depth")
-_RENDER_KEYS = ("background", "ambient", "light")
+_RENDER_KEYS = ("background", "ambient", "light", "intensity", "gain", "red", "blue", "shadows")
+# Lighting parameters whose values must be at least 0 (ambient also at most 1).
+_NONNEGATIVE = ("ambient", "intensity", "gain", "red", "blue")
 _INFERENCE_KEYS = ("p_jump", "data_birth", "data_birth_spread", "adapt", "anneal", "anneal_from",
                    "tries")
 _JUMPS = tuple(InferenceSettings().jump_weights)
@@ -157,10 +161,15 @@ class _Compiler(ImportsMixin, ShapesMixin):
         self.sensors: dict[str, _PendingSensor] = {}
         self.no_overlap = False
         self.max_objects: int | None = None
+        self.region = None  # sppl.region.Region or CamerasRegion
+        self.region_span: Span | None = None
+        self.restrictions: dict[str, object] = {}
         self.static_parts: list[Part] = []
         self.statics: dict[str, Span] = {}
         self.ground: Span | None = None
         self.render: dict[str, object] = {}
+        # The render block's latent lighting parameters, stepped like a sensor's noise.
+        self.lighting = _PendingSensor(RENDER_GROUP)
         self.inference: dict[str, object] = {}
         self.jump_weights: dict[str, float] = {}
         self.steps: list[ast.Step] = []
@@ -192,6 +201,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
             ast.Ground: self._ground,
             ast.Change: self.changes.append,
             ast.Constraint: self._constraint,
+            ast.Region: self._region,
             ast.Sensor: self._sensor,
             ast.Render: self._render,
             ast.Inference: self._inference,
@@ -206,6 +216,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
             )
         self._apply_steps()
         self._resolve_changes()
+        self._restrict()
         if self.main and not self.errors and not self.imported_errors:
             self._check_scene_size()
 
@@ -252,10 +263,11 @@ class _Compiler(ImportsMixin, ShapesMixin):
             classes=classes,
             sensors=sensors,
             inference=InferenceSettings(**self.inference, **self._jump_weights()),
-            render=RenderSettings(**self.render),
+            render=RenderSettings(**self.render, latent=tuple(self.lighting.parameters)),
             colours=dict(self.palette),
             no_overlap=self.no_overlap,
             max_objects=self.max_objects,
+            region=self.region,
             static_parts=tuple(self.static_parts),
             path=None if path == DEFAULT_PATH else Path(path),
             source=self.program.source,
@@ -285,6 +297,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
             floating=c.floating,
             correspondences=correspondences,
             correspondence_scales=scales,
+            restriction=self.restrictions.get(c.name),
         )
 
     def _global_scope(self, where: str = "a model setting") -> Scope:
@@ -525,11 +538,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
                 pending.count_span = item.span
                 pending.rate = self._count(item, local)
             elif isinstance(item, ast.Choice) and item.domain is None:
-                self.error(
-                    f"`{item.name.text}` has no domain",
-                    item.name.span,
-                    f"write `{item.name.text} : DOMAIN ~ PRIOR`, e.g. `: real`",
-                )
+                self._no_domain(item, "real")
             elif isinstance(item, ast.Setting):
                 key = item.key.text
                 if key not in _CLASS_SETTINGS:
@@ -628,6 +637,75 @@ class _Compiler(ImportsMixin, ShapesMixin):
         arg = self.expr.positional(rule)
         if arg is not None:
             self.max_objects = self._whole(arg[0], "`max_objects`")
+
+    def _region(self, node: ast.Region) -> None:
+        from .. import region as regions
+
+        kind = node.kind.text
+        if self.region_span is not None:
+            self.error(f"the region is already given on line {self.region_span.line}",
+                       node.span, "a model has one region; merge them into one polygon")
+            return
+        self.region_span = node.span
+        if kind not in regions.KINDS:
+            self.error(f"unknown region `{kind}`", node.kind.span,
+                       did_you_mean(kind, regions.KINDS) or known("regions", regions.KINDS))
+            return
+        scope = self._global_scope(where="a region")
+        try:
+            if kind == "cameras":
+                names = []
+                for a in node.args:
+                    if isinstance(a, ast.String | ast.Name):
+                        names.append(a.value if isinstance(a, ast.String) else a.id)
+                    else:
+                        self.error("`cameras(...)` takes the names of frames", a.span,
+                                   'e.g. `region cameras(left, "right")`')
+                        return
+                self.region = regions.CamerasRegion(tuple(names), self._where(node.span))
+            elif kind == "box":
+                if len(node.args) != 4 or any(
+                        isinstance(a, ast.Tuple | ast.String) for a in node.args):
+                    self.error("`box` takes four numbers: box(x_min, y_min, x_max, y_max)",
+                               node.span)
+                    return
+                values = self.expr.constants(node.args, scope)
+                if values is not None:
+                    self.region = regions.box(*values)
+            else:
+                points = []
+                for a in node.args:
+                    if not isinstance(a, ast.Tuple) or len(a.items) != 2:
+                        self.error("a polygon's corners are (x, y) pairs", a.span,
+                                   "e.g. `region polygon((0, 0), (4, 0), (0, 3))`")
+                        return
+                    xy = self.expr.constants(a.items, scope)
+                    if xy is None:
+                        return
+                    points.append(xy)
+                self.region = regions.polygon(points)
+        except regions.RegionError as error:
+            self.error(str(error), node.span)
+
+    def _where(self, span: Span) -> str:
+        return f"{self.program.path}:{span.line}:{span.column}"
+
+    def _restrict(self) -> None:
+        """Each placed class's position prior restricted to a box or polygon region, with its
+        normaliser (a camera region waits for the cameras: ``sppl.region.bind``)."""
+        from .. import region as regions
+
+        if self.region is None or isinstance(self.region, regions.CamerasRegion):
+            return
+        for c in self.classes.values():
+            if c.position is None:
+                continue
+            px, py = (_parameter(c, n) for n in c.position)
+            try:
+                self.restrictions[c.name] = regions.restrict(
+                    self.region, c.position, px.prior, py.prior, c.name)
+            except regions.RegionError as error:
+                self.error(str(error), self.region_span)
 
     def _resolve_changes(self) -> None:
         for node in self.changes:
@@ -736,11 +814,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
             elif item.name.text == "count":
                 self.error("a sensor has no `count`; counts belong to classes", item.name.span)
             elif item.domain is None:
-                self.error(
-                    f"`{item.name.text}` has no domain",
-                    item.name.span,
-                    f"write `{item.name.text} : DOMAIN ~ PRIOR`, e.g. `: positive`",
-                )
+                self._no_domain(item, "positive")
         self._compile_locals(own, local, pending, parameters_allowed=False)
         if likelihood is None:
             self.error(
@@ -840,6 +914,11 @@ class _Compiler(ImportsMixin, ShapesMixin):
             return value.id
         return self.expr.constant(value, self._global_scope())
 
+    def _no_domain(self, item: ast.Choice, example: str) -> None:
+        name = item.name.text
+        self.error(f"`{name}` has no domain", item.name.span,
+                   f"write `{name} : DOMAIN ~ PRIOR`, e.g. `: {example}`")
+
     def _first(self, key: tuple[str, ...], node: ast.Setting | ast.Step) -> bool:
         """Whether this is the first time a setting is given, reporting a repeat if not."""
         if key in self.seen:
@@ -851,24 +930,70 @@ class _Compiler(ImportsMixin, ShapesMixin):
 
     def _render(self, node: ast.Render) -> None:
         scope = self._global_scope()
+        choices = []
+        for item in node.settings:
+            if not isinstance(item, ast.Choice):
+                continue
+            name = item.name.text
+            if name not in LIGHTING:
+                self.error(
+                    f"the render block has no lighting parameter `{name}`",
+                    item.name.span,
+                    did_you_mean(name, LIGHTING) or known("lighting parameters", LIGHTING),
+                )
+            elif item.domain is None:
+                self._no_domain(item, "positive")
+            elif name in self.lighting.declared:
+                self.error(f"the lighting parameter `{name}` is already declared", item.name.span)
+            else:
+                choices.append(item)
+        before = len(self.lighting.parameters)
+        local, own = self._declare_locals(choices, self.lighting, "the render block")
+        self._compile_locals(own, local, self.lighting, parameters_allowed=False)
+        for parameter, item in zip(self.lighting.parameters[before:], choices):
+            self._lighting_domain(parameter, item)
         for setting in node.settings:
+            if isinstance(setting, ast.Choice):
+                continue
             key = setting.key.text
             if key not in _RENDER_KEYS:
                 self._unknown_setting(setting, "render", _RENDER_KEYS)
+            elif key in self.lighting.declared:
+                self.error(f"`{key}` is already a latent lighting parameter", setting.key.span,
+                           "give it either a value or a prior, not both")
             elif self._first(("render", key), setting):
                 value = self._render_value(key, setting.value, scope)
                 if value is not None:
                     self.render[key] = value
 
+    def _lighting_domain(self, parameter, item: ast.Choice) -> None:
+        """A latent lighting parameter's domain must hold only values that light a scene."""
+        name, domain = parameter.name, parameter.domain
+        if isinstance(domain, Finite):
+            self.error(f"the lighting parameter `{name}` is a number, not a categorical choice",
+                       item.domain.span)
+        elif name == "ambient" and (domain.contains(-1e-12) or domain.contains(1.0 + 1e-12)):
+            self.error("`ambient` lies in [0, 1]: its domain must too", item.domain.span,
+                       "write `ambient : interval(0, 1) ~ ...`")
+        elif name in _NONNEGATIVE and domain.contains(-1e-12):
+            self.error(f"`{name}` is not negative: its domain must not hold negative values",
+                       item.domain.span, f"write `{name} : positive ~ ...`")
+
     def _render_value(self, key: str, value: ast.Value, scope: Scope) -> object | None:
         if key == "background":
             return self.expr.colour(value, scope)
-        if key == "ambient":
-            ambient = self.expr.constant(value, scope)
-            if ambient is not None and not 0.0 <= ambient <= 1.0:
-                self.error(f"`ambient` lies in [0, 1], got {ambient:g}", value.span)
+        if key == "shadows":
+            if isinstance(value, ast.Name) and value.id in ("true", "false"):
+                return value.id == "true"
+            self.error("`shadows` is `true` or `false`", value.span)
+            return None
+        if key in _NONNEGATIVE:
+            number = self.expr.constant(value, scope)
+            if number is not None and not (0.0 <= number <= (1.0 if key == "ambient" else math.inf)):
+                limits = "[0, 1]" if key == "ambient" else "[0, inf)"
+                self.error(f"`{key}` lies in {limits}, got {number:g}", value.span)
                 return None
-            return ambient
+            return number
         if not isinstance(value, ast.Tuple) or len(value.items) != 3:
             self.error("`light` is a direction (x, y, z)", value.span)
             return None
@@ -962,7 +1087,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
     def _apply_steps(self) -> None:
         """Give each parameter its proposal scale: `step owner.name` wins over `step name`."""
         owners: dict[str, list[_Owner]] = {}
-        for owner in [*self.classes.values(), *self.sensors.values()]:
+        for owner in [*self.classes.values(), *self.sensors.values(), self.lighting]:
             owners.setdefault(owner.name, []).append(owner)
         scales: dict[tuple[str | None, str], float] = {}  # (owner or None, parameter): step
         for step in self.steps:
@@ -976,7 +1101,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
                 self.error(f"a step must be positive, got {value:g}", step.value.span)
             elif value is not None:
                 scales[owner, step.name.text] = value
-        for owner in [*self.classes.values(), *self.sensors.values()]:
+        for owner in [*self.classes.values(), *self.sensors.values(), self.lighting]:
             owner.parameters = [
                 replace(p, proposal_scale=_scale(scales, owner.name, p.name))
                 if _steppable(p) and _scale(scales, owner.name, p.name) is not None

@@ -394,6 +394,10 @@ class _ToAst(Transformer):
     def constraint(self, meta, children):
         return ast.Constraint(children[0], _span(meta))
 
+    def region(self, meta, children):
+        kind, *args = children
+        return ast.Region(kind, tuple(a for a in args if a is not None), _span(meta))
+
     def setting(self, meta, children):
         return ast.Setting(*children, _span(meta))
 

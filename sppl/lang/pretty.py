@@ -188,6 +188,9 @@ class _Printer:
             self._add(text, 0, node.span)
         elif isinstance(node, ast.Constraint):
             self._add(f"constraint {_rule(node.rule)}", 0, node.span)
+        elif isinstance(node, ast.Region):
+            args = f"({', '.join(expression(a) for a in node.args)})" if node.args else ""
+            self._add(f"region {node.kind.text}{args}", 0, node.span)
         elif isinstance(node, ast.Sensor):
             self._open(f"sensor {node.kind.text}", node)
             for item in node.body:
@@ -201,7 +204,8 @@ class _Printer:
         elif isinstance(node, ast.Render):
             self._open("render", node)
             for item in node.settings:
-                self._add(_setting(item), 1, item.span)
+                line = _setting(item) if isinstance(item, ast.Setting) else _choice(item)
+                self._add(line, 1, item.span)
             self._close(node)
         elif isinstance(node, ast.Inference):
             self._open("inference", node)

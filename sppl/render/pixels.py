@@ -39,7 +39,17 @@ from ..model import RenderSettings
 from .bounds import Rect, closed, union
 from .context import claim_state, gl_context
 from .kernels import compiled
-from .renderer import FLIP_Y, RAY_CAST, VERTEX_FORMAT, _column_major, flat_vertices, program, shape
+from .lighting import BLOCK_BYTES, block
+from .renderer import (
+    FLIP_Y,
+    LIGHTING_BINDING,
+    RAY_CAST,
+    VERTEX_FORMAT,
+    _column_major,
+    flat_vertices,
+    program,
+    shape,
+)
 
 if TYPE_CHECKING:
     from .drawlist import Drawn
@@ -107,7 +117,6 @@ class PixelScorer:
             self._prelude += resources.files(__package__).joinpath(
                 "shaders", "likelihood.glsl").read_text(encoding="utf-8")
         self._noise: list[dict[str, tuple]] = [{} for _ in self.cameras]
-        light = np.asarray(settings.light, dtype=float)
         # Each camera's observation stays bound to a texture unit of its own (while there
         # are units enough), so that a pass need not bind it.
         units = min(len(self.cameras), ctx.info["GL_MAX_TEXTURE_IMAGE_UNITS"])
@@ -116,9 +125,12 @@ class PixelScorer:
         self._culling = False
         # Each camera has its own programs (one per kind of shape, made when first drawn),
         # whose uniforms are set then, once: writing a camera's ten uniforms before each of
-        # its passes cost more than the draws.
-        self._light = tuple(light / np.linalg.norm(light))
+        # its passes cost more than the draws. The lighting, which a hypothesis may change,
+        # is one uniform block all of them read (lighting.glsl), written when it changes.
         self._settings = settings
+        self._lighting = ctx.buffer(reserve=BLOCK_BYTES, dynamic=True)
+        self._written: bytes | None = None
+        self.default_block = block(settings)
         self._programs: list[dict[str | None, moderngl.Program]] = [{} for _ in self.cameras]
         self._meshes = {}
         limit = ctx.info["GL_MAX_TEXTURE_SIZE"]
@@ -142,17 +154,20 @@ class PixelScorer:
 
     # -- drawing -------------------------------------------------------------------------------
 
-    def render(self, hypotheses: Sequence[Sequence[Drawn]]):
+    def render(self, hypotheses: Sequence[Sequence[Drawn]],
+               lighting: Sequence[bytes] | None = None):
         """Terms of whole hypotheses, each given as the ``Drawn`` of its static parts and
-        objects in order. Per hypothesis, a list of per-camera blocks (rect, terms): every
-        pixel outside rect is 0, since no part can reach it (None: nothing is in view);
-        and their float64 sums, (len(hypotheses), cameras, 2)."""
+        objects in order, lit by the ``Lighting`` block (``lighting.block``) given for it
+        (default: the scorer's settings, no casters). Per hypothesis, a list of per-camera
+        blocks (rect, terms): every pixel outside rect is 0, since no part can reach it
+        (None: nothing is in view); and their float64 sums, (len(hypotheses), cameras, 2)."""
         blocks, sums = [], np.zeros((len(hypotheses), len(self.cameras), 2))
         self._begin()
         # One hypothesis at a time, read back before the next is drawn: with llvmpipe
         # rasterising on the calling thread nothing overlaps anyway, and a batch of pending
         # framebuffers measured slower per hypothesis than one.
         for b, drawn in enumerate(hypotheses):
+            self._light(lighting[b] if lighting is not None else self.default_block)
             rects = []
             for c in range(len(self.cameras)):
                 fbo = self._target(c)
@@ -176,11 +191,14 @@ class PixelScorer:
         self.ctx.scissor = None  # left on, the scissor test would restrict others' clears
         return blocks, sums
 
-    def render_regions(self, drawn: Sequence[Drawn], rects: Sequence[Rect | None]):
+    def render_regions(self, drawn: Sequence[Drawn], rects: Sequence[Rect | None],
+                       lighting: bytes | None = None):
         """Terms of one hypothesis inside one rectangle per camera (None: skip that camera);
         a list of (rows, cols, 2) arrays, or None for the cameras skipped. Only what meets a
-        rectangle is drawn there."""
+        rectangle is drawn there; the ``Lighting`` block's casters, which shade it too, are
+        all the hypothesis's parts."""
         self._begin()
+        self._light(self.default_block if lighting is None else lighting)
         out = []
         for c, rect in enumerate(rects):
             if rect is None:
@@ -248,7 +266,7 @@ class PixelScorer:
             for obj in [*slot.vaos.values(), *slot.buffers.values()]:
                 obj.release()
         programs_ = [p for kinds in self._programs for p in kinds.values()]
-        for obj in [*self._meshes.values(), *self.observed, *programs_]:
+        for obj in [*self._meshes.values(), *self.observed, *programs_, self._lighting]:
             obj.release()
         self._targets, self._slots, self._meshes, self.observed = [], [], {}, []
         self._programs = []
@@ -264,6 +282,14 @@ class PixelScorer:
             # The projection's y flip makes front faces clockwise on the screen.
             self.ctx.front_face = "cw"
             self._bound = [None] * len(self._bound)
+            # Another user binds its own block to the same point.
+            self._lighting.bind_to_uniform_block(LIGHTING_BINDING)
+
+    def _light(self, data: bytes) -> None:
+        """Make ``data`` the block the next draws read, writing it only if it changed."""
+        if data != self._written:
+            self._lighting.write(data)
+            self._written = data
 
     def _draw(self, c: int, drawn: Sequence[Drawn], region: Rect | None) -> Rect | None:
         """Draw camera c's view of ``drawn`` (inside ``region``) into the bound framebuffer;
@@ -336,8 +362,6 @@ class PixelScorer:
             found = self._programs[c][kind] = program(self.ctx, "terms.vert", "terms.frag", kind,
                                                       self._prelude)
             self._write(found, self._noise[c])
-            found["light"].value = self._light
-            found["ambient"].value = float(settings.ambient)
             found["background"].value = tuple(float(x) for x in settings.background)
             found["observed"].value = self._unit[c]
             found["view"].write(_column_major(camera.w2c))

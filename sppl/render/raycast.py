@@ -33,17 +33,16 @@ def raycast(
     ``depth_max``, where no scene of interest reaches).
     """
     settings = render_settings or RenderSettings()
-    light = np.asarray(settings.light, dtype=float)
-    light = light / np.linalg.norm(light)
+    light = np.asarray(settings.direction)
     h, w = camera.height, camera.width
     origin = camera.position
     directions = camera.ray_directions().reshape(-1, 3)
     forward = -camera.c2w[:3, 2] / np.linalg.norm(camera.c2w[:3, 2])
 
+    parts = list(parts)
     nearest = np.full(h * w, np.inf)  # distance along each ray to the nearest hit
-    rgb = np.tile(np.asarray(settings.background, dtype=float), (h * w, 1))
-    colour_of = lambda part, normals: np.asarray(part.colour, dtype=float)[None, :] * (  # noqa: E731
-        settings.ambient + (1.0 - settings.ambient) * np.maximum(normals @ light, 0.0))[:, None]
+    colour = np.zeros((h * w, 3))  # the unlit colour of the part each ray hits
+    normal = np.zeros((h * w, 3))  # its outward unit normal there
     for part in parts:
         if part.primitive in ROUND:
             # The GL renderer clips at its near plane, a plane of constant z: a ray's hits
@@ -53,25 +52,81 @@ def raycast(
                 continue
             closer = t < nearest
             nearest[closer] = t[closer]
-            rgb[closer] = colour_of(part, normals[closer])
+            colour[closer] = part.colour
+            normal[closer] = normals[closer]
             continue
         triangles, normals = _posed_triangles(part)
         if len(triangles) == 0:
             continue
-        colours = colour_of(part, normals)
         for start in range(0, h * w, BATCH):
             rays = slice(start, start + BATCH)
             t, face = _nearest_hits(origin, directions[rays], triangles)
             t[t * (directions[rays] @ forward) <= camera.near] = np.inf
             closer = t < nearest[rays]
             nearest[rays][closer] = t[closer]  # slices are views: these write through
-            rgb[rays][closer] = colours[face[closer]]
+            colour[rays][closer] = part.colour
+            normal[rays][closer] = normals[face[closer]]
 
     hit = np.isfinite(nearest)
+    balance = np.asarray(settings.balance, dtype=float)
+    rgb = np.tile(np.asarray(settings.background, dtype=float) * balance, (h * w, 1))
+    lambert = np.maximum(normal[hit] @ light, 0.0)
+    if settings.shadows:
+        points = origin + nearest[hit][:, None] * directions[hit]
+        facing = lambert > 0.0
+        lambert[facing] *= ~_shadowed(parts, points[facing], light)
+    rgb[hit] = balance * colour[hit] * (
+        settings.ambient + settings.intensity * (1.0 - settings.ambient) * lambert)[:, None]
     depth = np.full(h * w, float(camera.depth_max))
     along = nearest if camera.depth_type == "ray" else nearest * (directions @ forward)
     depth[hit] = np.minimum(along[hit], camera.depth_max)
     return rgb.reshape(h, w, 3).astype("f4"), depth.reshape(h, w).astype("f4")
+
+
+# A point is in a part's shadow when its ray towards the light meets the part more than this
+# far away (metres): lighting.glsl's SHADOW_BIAS.
+SHADOW_BIAS = 1e-3
+
+
+def _shadowed(parts, points: np.ndarray, light: np.ndarray) -> np.ndarray:
+    """Whether each point's ray towards the light crosses a part's surface beyond
+    SHADOW_BIAS. Parts are closed, so such a crossing is where the ray enters or leaves a
+    solid; a point on its own part, lit from outside, leaves it at once. Mesh files cast no
+    shadow (as in the GL renderers, which test only built-in solids)."""
+    blocked = np.zeros(len(points), dtype=bool)
+    directions = np.tile(light, (len(points), 1))
+    bias = np.full(len(points), SHADOW_BIAS)
+    for part in parts:
+        if part.primitive in ROUND:
+            t, _ = _round_hits(part, points, directions, bias)
+            if t is not None:
+                blocked |= np.isfinite(t)
+        elif part.primitive == "box":
+            triangles, _ = _posed_triangles(part)
+            for start in range(0, len(points), BATCH):
+                rays = slice(start, start + BATCH)
+                t = _hits_from(points[rays], light, triangles)
+                blocked[rays] |= np.any(t > SHADOW_BIAS, axis=1)
+    return blocked
+
+
+def _hits_from(origins: np.ndarray, direction: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Möller–Trumbore from each origin (R, 3) along one direction: the distance to each
+    triangle (R, F), -inf where the ray misses it."""
+    v0 = triangles[:, 0]
+    e1 = triangles[:, 1] - v0
+    e2 = triangles[:, 2] - v0
+    p = np.cross(direction, e2)  # (F, 3)
+    det = np.einsum("fk,fk->f", p, e1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_det = 1.0 / det
+        s = origins[:, None, :] - v0[None, :, :]  # (R, F, 3)
+        u = np.einsum("rfk,fk->rf", s, p) * inv_det
+        q = np.cross(s, e1)  # (R, F, 3)
+        v = (q @ direction) * inv_det
+        t = np.einsum("fk,rfk->rf", e2, q) * inv_det
+        hit = (np.abs(det) > 1e-12) & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0)
+    return np.where(hit, t, -np.inf)
 
 
 def _round_hits(part: Part, origin, directions, start):
@@ -79,22 +134,24 @@ def _round_hits(part: Part, origin, directions, start):
     only hits at least ``start`` (per ray) along it, and the outward unit normals (N, 3) there;
     (None, None) for a part with no volume. The unit shapes: a sphere of radius 1 centred at
     (0, 0, 1); a cylinder of radius 1 about the z axis for z in [0, 1], with its caps; a cone
-    of base radius 1 at z = 0 and apex (0, 0, 1), with its base."""
+    of base radius 1 at z = 0 and apex (0, 0, 1), with its base. ``origin`` is one point, or
+    one per ray (N, 3)."""
     matrix = np.asarray(part.matrix, dtype=float)
     linear = matrix[:3, :3]
     if abs(np.linalg.det(linear)) < 1e-12:
         return None, None
     unit_from_world = np.linalg.inv(linear)
-    o = unit_from_world @ (origin - matrix[:3, 3])  # the camera in unit coordinates
+    o = (origin - matrix[:3, 3]) @ unit_from_world.T  # the ray's origin in unit coordinates
     d = directions @ unit_from_world.T
     candidates = []  # (t, the unit shape's normal there), t NaN where there is no such hit
     if part.primitive == "sphere":
         # |o + t d - (0, 0, 1)|^2 = 1
-        centred = o - (0.0, 0.0, 1.0)
-        for t in _roots(np.einsum("nk,nk->n", d, d), d @ centred, centred @ centred - 1.0):
+        centred = np.broadcast_to(o - (0.0, 0.0, 1.0), d.shape)
+        for t in _roots(np.einsum("nk,nk->n", d, d), np.einsum("nk,nk->n", d, centred),
+                        np.einsum("nk,nk->n", centred, centred) - 1.0):
             candidates.append((t, centred + t[:, None] * d))
     else:
-        x, y, z = o
+        x, y, z = o.T
         dx, dy, dz = d.T
         if part.primitive == "cylinder":
             # x^2 + y^2 = 1 for z in [0, 1], then the planes z = 0 and z = 1 inside radius 1.

@@ -27,10 +27,15 @@ from ..geometry import MESH_PREFIX, PRIMITIVES, Part, linear_inverse, unit_mesh
 from ..model import RenderSettings
 from .bounds import closed, contains
 from .context import claim_state, gl_context
+from .lighting import BLOCK_BYTES, block, caster_rows, check_light
 
 # GL's window origin is the bottom-left corner and images' is the top-left: flipping y in clip
 # space makes GL's first row the image's top row, so the read-back is already in image order.
 FLIP_Y = np.diag([1.0, -1.0, 1.0, 1.0])
+
+
+# The uniform-buffer binding point of lighting.glsl's block, in every program.
+LIGHTING_BINDING = 0
 
 
 # Primitives whose surface the fragment shader ray-casts exactly over a proxy mesh.
@@ -49,14 +54,19 @@ def shape(primitive: str) -> str | None:
 def _shader(name: str, shape: str | None = None, prelude: str = "") -> str:
     """A shader's source; with a ``shape`` of RAY_CAST, its variant that ray-casts it."""
     text = resources.files(__package__).joinpath("shaders", name).read_text(encoding="utf-8")
-    if prelude:
-        version, _, body = text.partition("\n")
-        text = f"{version}\n{prelude}\n{body}"
-    if shape is None:
+    if not name.endswith((".frag", ".vert")):
         return text
+    # Every fragment shader shades with lighting.glsl's block; a ray-cast one hits its shape
+    # with ray_cast.glsl. The prelude (its defines first) goes above them all.
     version, _, body = text.partition("\n")
-    extra = _shader("ray_cast.glsl") if name.endswith(".frag") else ""
-    return f"{version}\n#define RAY_CAST\n#define HIT {shape}_hit\n{extra}\n{body}"
+    extra = _shader("lighting.glsl") if name.endswith(".frag") else ""
+    if shape is not None:
+        if name.endswith(".frag"):
+            extra = f"{_shader('ray_cast.glsl')}\n{extra}"
+        extra = f"#define RAY_CAST\n#define HIT {shape}_hit\n{extra}"
+    if prelude:
+        extra = f"{prelude}\n{extra}"
+    return f"{version}\n{extra}\n{body}"
 
 
 def program(ctx: moderngl.Context, vertex: str, fragment: str,
@@ -64,11 +74,13 @@ def program(ctx: moderngl.Context, vertex: str, fragment: str,
     """The program of a pair of shaders that draws meshes (``shape`` None) or ray-casts a
     round shape; ``prelude`` is GLSL put at the top of the fragment shader."""
     try:
-        return ctx.program(vertex_shader=_shader(vertex, shape),
+        made = ctx.program(vertex_shader=_shader(vertex, shape),
                            fragment_shader=_shader(fragment, shape, prelude))
     except moderngl.Error as error:
         raise RenderError(f"the shaders {vertex} and {fragment} did not compile on this GL "
                           f"driver: {error}") from None
+    made["Lighting"].binding = LIGHTING_BINDING
+    return made
 
 
 def _column_major(matrix: np.ndarray) -> bytes:
@@ -139,11 +151,9 @@ class Renderer:
 
     def __init__(self, render_settings: RenderSettings | None = None) -> None:
         self.settings = render_settings or RenderSettings()
-        light = np.asarray(self.settings.light, dtype=float)
-        if not np.all(np.isfinite(light)) or np.linalg.norm(light) == 0.0:
-            raise RenderError(f"the light direction {tuple(light)} is not a nonzero vector")
+        check_light(self.settings)
         self.ctx = gl_context()
-        self._light = tuple(light / np.linalg.norm(light))
+        self._lighting = self.ctx.buffer(reserve=BLOCK_BYTES, dynamic=True)
         # Programs and meshes are made the first time a part needs them.
         self._programs: dict[str | None, moderngl.Program] = {}
         self._buffers: dict[str, moderngl.Buffer] = {}
@@ -151,17 +161,21 @@ class Renderer:
         self._targets: dict[tuple[int, int], _Target] = {}
         self._released = False
 
-    def render(self, parts: Iterable[Part], camera: Camera) -> tuple[np.ndarray, np.ndarray]:
-        """RGB (H, W, 3) in [0, 1] and depth (H, W) in metres of ``camera.depth_type``."""
+    def render(self, parts: Iterable[Part], camera: Camera,
+               settings: RenderSettings | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """RGB (H, W, 3) in [0, 1] and depth (H, W) in metres of ``camera.depth_type``,
+        lit as ``settings`` say (default: the renderer's own; another's lighting may differ,
+        as a hypothesis's latent lighting does)."""
         if self._released:
             raise RenderError("this renderer has been released")
+        settings = settings or self.settings
         target = self._target(camera.width, camera.height)
         # The context is shared with other users in the process; set every state this pass
         # needs, the scissor test first (left on, it would restrict the clears).
         claim_state(self)
         self.ctx.scissor = None
         self.ctx.enable_only(moderngl.DEPTH_TEST)
-        background = tuple(float(c) for c in self.settings.background)
+        background = tuple(float(c) * k for c, k in zip(settings.background, settings.balance))
         target.clear_colour.clear(*background, 1.0, depth=1.0)
         target.clear_depth.clear(float(camera.depth_max))
 
@@ -169,6 +183,9 @@ class Renderer:
         view = _column_major(camera.w2c)
         projection = _column_major(FLIP_Y @ camera.projection())
         parts = list(parts)
+        check_light(settings)
+        self._lighting.write(block(settings, caster_rows(parts) if settings.shadows else b""))
+        self._lighting.bind_to_uniform_block(LIGHTING_BINDING)
         for kind in {shape(p.primitive) for p in parts}:
             program = self._program(kind)
             program["view"].write(view)
@@ -210,7 +227,8 @@ class Renderer:
         """Free this renderer's GL objects (the shared context stays)."""
         for target in self._targets.values():
             target.release()
-        for obj in [*self._vaos.values(), *self._buffers.values(), *self._programs.values()]:
+        for obj in [*self._vaos.values(), *self._buffers.values(), *self._programs.values(),
+                    self._lighting]:
             obj.release()
         self._targets, self._vaos, self._buffers, self._programs = {}, {}, {}, {}
         self._released = True
@@ -250,8 +268,6 @@ class Renderer:
         found = self._programs.get(kind)
         if found is None:
             found = self._programs[kind] = program(self.ctx, "scene.vert", "scene.frag", kind)
-            found["light"].value = self._light
-            found["ambient"].value = float(self.settings.ambient)
         return found
 
     def _target(self, width: int, height: int) -> _Target:

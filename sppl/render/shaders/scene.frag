@@ -1,8 +1,6 @@
 #version 330
 
 uniform vec3 colour;
-uniform vec3 light;      // unit direction towards the light, world space
-uniform float ambient;
 uniform bool ray_depth;  // distance from the optical centre instead of along the optical axis
 uniform float depth_max;
 
@@ -30,8 +28,7 @@ void main() {
     normal = normal_matrix * unit_normal;
     gl_FragDepth = window_depth(projection, camera_point);
 #endif
-    float lambert = max(dot(normalize(normal), light), 0.0);
-    out_colour = vec4(colour * (ambient + (1.0 - ambient) * lambert), 1.0);
+    out_colour = vec4(shade(colour, normal, camera_point), 1.0);
     float depth = ray_depth ? length(camera_point) : -camera_point.z;
     out_depth = min(depth, depth_max);
 }

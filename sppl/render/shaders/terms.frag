@@ -3,10 +3,10 @@
 // Shades a fragment as scene.frag does, then writes its pixel's likelihood term instead of its
 // colour: for each modality, (observed - rendered)^2 minus (observed - background)^2, or for a
 // robust likelihood (likelihood.glsl, put above this by pixels.py) its log density at the
-// rendering less at the background. Pixels no part covers keep the cleared 0, so the image's
-// sum is the statistic less that of the empty scene, which is computed on the CPU.
-uniform vec3 light;
-uniform float ambient;
+// rendering less at the background. The background is seen through the camera's gain and white
+// balance (lighting.glsl's block), as scene.frag renders it. Pixels no part covers keep the
+// cleared 0, so the image's sum is the statistic less that of the empty scene, which is
+// computed on the CPU.
 uniform bool ray_depth;
 uniform float depth_max;
 uniform vec3 background;
@@ -39,18 +39,17 @@ void main() {
     normal = v_normal_matrix * unit_normal;
     gl_FragDepth = window_depth(projection, camera_point);
 #endif
-    float lambert = max(dot(normalize(normal), light), 0.0);
-    vec3 colour = v_colour * (ambient + (1.0 - ambient) * lambert);
+    vec3 colour = shade(v_colour, normal, camera_point);
     float depth = ray_depth ? length(camera_point) : -camera_point.z;
     depth = min(depth, depth_max);
     vec4 o = texelFetch(observed, ivec2(gl_FragCoord.xy), 0);
     float image = 0.0;
     if (o.r > MISSING_BELOW) {
 #if IMAGE_TERM != 0
-        image = image_density(o.rgb, colour) - image_density(o.rgb, background);
+        image = image_density(o.rgb, colour) - image_density(o.rgb, balance.rgb * background);
 #else
         vec3 a = o.rgb - colour;
-        vec3 b = o.rgb - background;
+        vec3 b = o.rgb - balance.rgb * background;
         image = dot(a, a) - dot(b, b);
 #endif
     }
