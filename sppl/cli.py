@@ -318,8 +318,8 @@ def cmd_sample(args) -> int:
     from .lang import load_model
     from .observations import load_observations
     from .posterior import write_posterior
-    from .run import run_chains
-    from .samples import format_summary
+    from .run import effective_burn, run_chains
+    from .samples import MIN_SAMPLES, format_summary
 
     if args.resume is not None:
         _resume_settings(args)
@@ -334,9 +334,22 @@ def cmd_sample(args) -> int:
         args.lockstep = bool(args.lockstep)
     if args.steps < 1 or args.thin < 1 or args.chains < 1:
         raise UsageError("--steps, --thin and --chains must be at least 1")
+    if args.burn is not None and args.burn < 0:
+        raise UsageError("--burn is a number of sweeps, 0 or more")
     if not args.checkpoint_every >= 0:
         raise UsageError("--checkpoint-every is a number of seconds, 0 or more")
     model = load_model(args.model)
+    burn = effective_burn(model, args.steps, args.burn)
+    first = -(-max(burn, 1) // args.thin) * args.thin  # the first kept step: thin divides it
+    planned = args.chains * len(range(first, args.steps + 1, args.thin))
+    if planned < MIN_SAMPLES:
+        warmup = model.inference
+        why = ("--burn" if args.burn is not None and args.burn >= burn
+               else "half the steps" if burn == args.steps // 2
+               else f"the warm-up: adapt {warmup.adapt}, anneal {warmup.anneal}")
+        print(f"warning: --steps {args.steps} leaves {planned} samples after the burn-in of {burn} "
+              f"({why}): the summary will be partial; give more --steps, or --resume the run "
+              "with more later", file=sys.stderr)
     obs = load_observations(args.obs)
     if args.resume is None:
         _prepare_out(args.out, args.force, kind="run",
@@ -354,6 +367,8 @@ def cmd_sample(args) -> int:
         print(f"posterior (ArviZ): {write_posterior(args.out)}")
     except SpplError as e:
         print(f"no posterior file: {e}", file=sys.stderr)
+    if result.summary.get("partial"):
+        print(f"warning: partial summary: {result.summary['partial']}", file=sys.stderr)
     if result.summary["interrupted"]:
         print(f"to continue: sppl sample --resume {args.out}", file=sys.stderr)
         return 130
