@@ -342,10 +342,11 @@ def cmd_sample(args) -> int:
     burn = effective_burn(model, args.steps, args.burn)
     first = -(-max(burn, 1) // args.thin) * args.thin  # the first kept step: thin divides it
     planned = args.chains * len(range(first, args.steps + 1, args.thin))
-    if planned < MIN_SAMPLES:
+    # Said before the run, when the warm-up or --burn leaves too few samples (a short run with
+    # the default burn-in of half its steps is a quick look, and its summary says so after).
+    if planned < MIN_SAMPLES and (args.burn is not None or burn > args.steps // 2):
         warmup = model.inference
         why = ("--burn" if args.burn is not None and args.burn >= burn
-               else "half the steps" if burn == args.steps // 2
                else f"the warm-up: adapt {warmup.adapt}, anneal {warmup.anneal}")
         print(f"warning: --steps {args.steps} leaves {planned} samples after the burn-in of {burn} "
               f"({why}): the summary will be partial; give more --steps, or --resume the run "

@@ -235,12 +235,13 @@ class Scorer(ReferenceScorer):
         for t in self.terms:
             if t.kind == "image":
                 observed[t.frame][0] = t.observed
-                r = (t.observed - background).astype(np.float64)
+                r = np.subtract(t.observed, background, dtype=np.float64)  # exact
                 self._constant[(t.frame, t.kind)] = (t.observed.size, float(np.sum(r * r)))
             else:
                 valid = np.ones(t.observed.shape, bool) if t.valid is None else t.valid
                 observed[t.frame][1] = np.where(valid, t.observed, np.nan)
-                r = (t.observed[valid] - np.float32(t.camera.depth_max)).astype(np.float64)
+                r = np.subtract(t.observed[valid], np.float32(t.camera.depth_max),
+                                dtype=np.float64)
                 self._constant[(t.frame, t.kind)] = (int(valid.sum()), float(np.sum(r * r)))
         self._slot = {(t.frame, t.kind): (index[t.frame], 0 if t.kind == "image" else 1)
                       for t in self.terms}
