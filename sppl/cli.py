@@ -116,6 +116,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="width and height in pixels of the Geweke test's images (default: 8)")
     v.add_argument("--alpha", type=float, default=0.01,
                    help="family-wise false-alarm rate of the whole table (default: 0.01)")
+    v.add_argument("--strict", action="store_true",
+                   help="fail (exit 1) when a check is left untested, not only when one fails")
 
     e = sub.add_parser(
         "export",
@@ -456,8 +458,8 @@ def cmd_verify(args) -> int:
         alpha=args.alpha, progress=lambda message: print(message, file=sys.stderr, flush=True),
     )
     print(f"{args.model}: verifying the sampler derived from this model")
-    print(report.table())
-    return 0 if report.passed else 1
+    print(report.table(strict=args.strict))
+    return 0 if (report.passed_strict if args.strict else report.passed) else 1
 
 
 COMMANDS = {"check": cmd_check, "fmt": cmd_fmt, "simulate": cmd_simulate, "sample": cmd_sample,

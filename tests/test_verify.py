@@ -519,6 +519,41 @@ def test_sppl_verify_shapes_quick(require_gl, root, capsys):
     assert code == 0, out
     assert "quantity" in out and "p-value" in out and "PASS" in out
     assert "count of cube" in out and "geweke" in out
+    for line in out.splitlines():  # a row left untested is shown as such, never as a pass
+        if "untested: the run is" in line:
+            assert line.rstrip().endswith("untested"), line
+
+
+def _report_with_an_untested_row() -> verify.Report:
+    return verify.Report([
+        verify.Row("prior", "count of ball", "Poisson(1)", "mean 1.0", 0.5),
+        verify.Row("prior", "image.sigma", "-", "untested: the run is 35 autocorrelation times "
+                   "long (< 200)", None, True, tested=False),
+        verify.Row("moves", "birth: reverse undoes it", "same trace", "10/10 same", None, True),
+    ])
+
+
+def test_an_untested_row_is_shown_as_untested_and_fails_only_under_strict():
+    report = _report_with_an_untested_row()
+    assert report.passed and not report.passed_strict and report.untested == ["image.sigma"]
+    lines = report.table().splitlines()
+    assert lines[3].rstrip().endswith("untested") and lines[2].rstrip().endswith("pass")
+    assert "1 statistical checks" in lines[-2] and "1 exact checks; 1 untested." in lines[-2]
+    assert lines[-1].startswith("PASS, but 1 untested") and "prior: image.sigma" in lines[-1]
+    assert report.table(strict=True).splitlines()[-1] == \
+        "FAIL (--strict): untested: prior: image.sigma"
+    tested = verify.Report(report.rows[::2])
+    assert tested.passed_strict and tested.table(strict=True).endswith("PASS: every check passed.")
+
+
+def test_sppl_verify_strict_exits_1_on_an_untested_row(root, capsys, monkeypatch):
+    """The report stands in for a run (the runs themselves are tested above)."""
+    monkeypatch.setattr(verify, "verify_model", lambda *a, **k: _report_with_an_untested_row())
+    model = str(root / "models" / "shapes.scn")
+    assert cli.main(["verify", model]) == 0
+    assert "PASS, but 1 untested" in capsys.readouterr().out
+    assert cli.main(["verify", model, "--strict"]) == 1
+    assert "FAIL (--strict): untested: prior: image.sigma" in capsys.readouterr().out
 
 
 def test_sppl_verify_names_the_failing_check_of_a_broken_likelihood(require_gl, capsys):
