@@ -686,6 +686,16 @@ def _finished_warmup(model: Model, rng) -> Warmup | None:
     return sampler.warmup
 
 
+def prior_scene(model: Model, rng: np.random.Generator):
+    """(objects, noise) drawn from the prior, the objects in a random order. ``sample_objects``
+    lists them class by class, and chains started only from such tuples would never test a
+    move on another order: one that depended on it (a death or a change choosing by position)
+    could pass. The scene is a set, so any order is as good a start."""
+    objects = sample_objects(model, rng)
+    objects = tuple(objects[i] for i in rng.permutation(len(objects)))
+    return objects, sample_noise(model, rng)
+
+
 def _trace_with(sampler: Sampler, objects, noise, renders, log_prior=None) -> Trace:
     """The trace of these objects under the sampler's observations, from renders already
     made (so a change of observations costs no rendering)."""
@@ -781,7 +791,7 @@ def geweke(
     data_births = [0, 0]
     for r, chain_seq in enumerate(sc_seq.spawn(chains)):
         rng = np.random.default_rng(chain_seq)
-        objs, noise = sample_objects(m, rng), sample_noise(m, rng)
+        objs, noise = prior_scene(m, rng)
         renders = sim.render(objs)
         sampler = sim.sampler(sim.observe(renders, noise, rng), rng, sampler_factory, stats_,
                               warmup)
@@ -1050,7 +1060,7 @@ def sbc(
     warmup = _finished_warmup(m, np.random.default_rng(warmup_seq))
     for r, rep_seq in enumerate(replicate_seqs):
         rng = np.random.default_rng(rep_seq)
-        objs, noise = sample_objects(m, rng), sample_noise(m, rng)
+        objs, noise = prior_scene(m, rng)
         renders = sim.render(objs)
         sampler = sim.sampler(sim.observe(renders, noise, rng), rng, sampler_factory,
                               warmup=warmup)

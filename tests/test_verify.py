@@ -481,6 +481,35 @@ def test_sbc_ranks_are_uniform(require_gl):
     assert report.passed, report.table()
 
 
+def test_geweke_and_sbc_start_from_scenes_in_random_order(require_gl, monkeypatch):
+    """Their chains start from prior scenes whose objects are shuffled (seeded), not listed
+    class by class as ``sample_objects`` lists them."""
+    model = seen_world()
+    rng = np.random.default_rng(0)
+    orders = set()
+    for _ in range(200):
+        objects, noise = verify.prior_scene(model, rng)
+        orders.add(tuple(o.cls.name for o in objects))
+        assert set(noise) == {"image", "depth"}
+    assert ("block", "ball") in orders and ("ball", "block") in orders
+    first = [tuple(o.values["x"] for o in verify.prior_scene(model, np.random.default_rng(3))[0])
+             for _ in range(2)]
+    assert first[0] == first[1]  # seeded
+
+    started, original = [], verify.prior_scene
+
+    def recorded(m, r):
+        scene = original(m, r)
+        started.append(tuple(o.cls.name for o in scene[0]))
+        return scene
+
+    monkeypatch.setattr(verify, "prior_scene", recorded)
+    verify.sbc(model, replicates=30, draws=1, thin=1, seed=1)
+    verify.geweke(model, chains=30, length=1, seed=1, mc_draws=10)
+    assert len(started) == 60
+    assert any(names != tuple(sorted(names, key=["ball", "block"].index)) for names in started)
+
+
 def test_adjoint_sweep_reverses_the_order_of_moves():
     """SBC's exactness rests on adjoint_sweep being sweep's moves in reverse order."""
     model = toy_model([ball_class(rate=2.0)], noise=True)
