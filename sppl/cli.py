@@ -129,6 +129,8 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--proposal-draws", type=int, default=30,
                    help="draws per check of a proposal that looks at the observations "
                    "(sampler against density; 0: leave those checks out; default: 30)")
+    v.add_argument("--strict", action="store_true",
+                   help="fail (exit 1) when a check is left untested, not only when one fails")
 
     e = sub.add_parser(
         "export",
@@ -476,8 +478,8 @@ def _sample(args) -> int:
     from .lang import load_model
     from .observations import load_observations
     from .posterior import write_posterior
-    from .run import run_chains
-    from .samples import format_summary
+    from .run import effective_burn, run_chains
+    from .samples import MIN_SAMPLES, format_summary
 
     if args.resume is None:
         if args.model is None or args.obs is None:
@@ -490,12 +492,26 @@ def _sample(args) -> int:
         args.lockstep = bool(args.lockstep)
     if args.steps < 1 or args.thin < 1 or args.chains < 1:
         raise UsageError("--steps, --thin and --chains must be at least 1")
+    if args.burn is not None and args.burn < 0:
+        raise UsageError("--burn is a number of sweeps, 0 or more")
     if not args.checkpoint_every >= 0:
         raise UsageError("--checkpoint-every is a number of seconds, 0 or more")
     if args.burn is not None and args.burn < 0:
         raise UsageError("--burn is a number of sweeps, 0 or more")
     _check_seed(args.seed)
     model = load_model(args.model)
+    burn = effective_burn(model, args.steps, args.burn)
+    first = -(-max(burn, 1) // args.thin) * args.thin  # the first kept step: thin divides it
+    planned = args.chains * len(range(first, args.steps + 1, args.thin))
+    # Said before the run, when the warm-up or --burn leaves too few samples (a short run with
+    # the default burn-in of half its steps is a quick look, and its summary says so after).
+    if planned < MIN_SAMPLES and (args.burn is not None or burn > args.steps // 2):
+        warmup = model.inference
+        why = ("--burn" if args.burn is not None and args.burn >= burn
+               else f"the warm-up: adapt {warmup.adapt}, anneal {warmup.anneal}")
+        print(f"warning: --steps {args.steps} leaves {planned} samples after the burn-in of {burn} "
+              f"({why}): the summary will be partial; give more --steps, or --resume the run "
+              "with more later", file=sys.stderr)
     if args.resume is None and is_dataset(args.obs):
         return _sample_dataset(args, model)
     if args.workers is not None or args.cluster is not None:
@@ -524,6 +540,8 @@ def _sample(args) -> int:
             print(f"posterior (ArviZ): {write_posterior(args.out)}")
         except SpplError as e:
             print(f"no posterior file: {e}", file=sys.stderr)
+        if result.summary.get("partial"):
+            print(f"warning: partial summary: {result.summary['partial']}", file=sys.stderr)
     if result.summary["interrupted"]:
         print(f"to continue: sppl sample --resume {args.out}", file=sys.stderr)
         return 130
@@ -654,8 +672,8 @@ def cmd_verify(args) -> int:
         proposal_draws=args.proposal_draws,
     )
     print(f"{args.model}: verifying the sampler derived from this model")
-    print(report.table())
-    return 0 if report.passed else 1
+    print(report.table(strict=args.strict))
+    return 0 if (report.passed_strict if args.strict else report.passed) else 1
 
 
 COMMANDS = {"check": cmd_check, "fmt": cmd_fmt, "simulate": cmd_simulate, "sample": cmd_sample,

@@ -36,7 +36,7 @@ import numpy as np
 
 from . import __version__
 from .errors import SpplError
-from .samples import read_samples
+from .samples import partial_reason, read_samples
 
 POSTERIOR_FILE = "posterior.nc"
 
@@ -255,6 +255,8 @@ def _attrs(run: RunFiles, n_chains: int, n_draws: int) -> dict[str, Any]:
         "gl_renderer": meta.get("gl_renderer") or run.chains[0].meta.get("gl_renderer"),
         "run_folder": str(run.folder),
         "slots": "objects padded to slots; `exists` marks real ones; slot order is not identity",
+        # The summary's mark, when too few samples were left after burn-in (sppl.samples).
+        "partial": partial_reason(n_chains * n_draws, run.burn),
     }
     model = meta.get("model")
     if model and Path(model).is_file():

@@ -650,6 +650,7 @@ img { max-width: 100%; display: block; margin: 0.5em 0; }
 table { border-collapse: collapse; margin: 0.6em 0; font-size: 0.92em; }
 th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: left; }
 tr.warn td, tr.warn th { background: #fde8e8; }
+.partial { background: #fde8e8; border: 2px solid #c00; padding: 0.5em; font-weight: bold; }
 pre { background: #f6f6f6; padding: 0.8em; font-size: 0.85em; white-space: pre-wrap;
       overflow-wrap: anywhere; }  /* long summary lines wrap, never cut off */
 .caption, .note { color: #555; font-size: 0.92em; }
@@ -860,11 +861,15 @@ def write_report(
         f"{html.escape(json.dumps(meta.get('seed')))}; {post.n_draws} draws per chain after "
         f"burn-in of {run.burn} sweeps.</p>"
     )
+    # A run with too few samples after burn-in says so before anything else (sppl.samples).
+    partial = (f"<p class='partial'>PARTIAL SUMMARY: {html.escape(summary['partial'])}</p>"
+               if summary.get("partial") else "")
     page = (
         "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
         f"<title>sppl report: {html.escape(run_folder.name)}</title>"
         f"<style>{CSS}{VIEW_CSS}</style></head>"
-        f"<body><h1>sppl report: {html.escape(str(run_folder))}</h1>{info}{_explain('intro')}"
+        f"<body><h1>sppl report: {html.escape(str(run_folder))}</h1>"
+        f"{partial}{info}{_explain('intro')}"
         f"<pre>{html.escape(format_summary(summary))}</pre>{''.join(sections)}</body></html>\n"
     )
     index = folder / "index.html"

@@ -171,9 +171,7 @@ class ChainRun:
         self.sampler = sampler = Sampler(model, scorer, rng)
         # Which objects some camera sees, worked out for the samples written (sppl.seen).
         self.seen = SeenCache(model, observations.cameras)
-        # The warm-up's sweeps (adaptation, annealing) never count as samples of the posterior.
-        burn_option, burn = burn, steps // 2 if burn is None else burn
-        self.burn = max(burn, warmup_sweeps(model.inference))
+        burn_option, self.burn = burn, effective_burn(model, steps, burn)
         self.state = state = read_checkpoint(out) if resume else None
         meta = {
             "sppl_version": __version__,
@@ -261,6 +259,13 @@ class ChainRun:
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2))
         (self.out / "summary.txt").write_text(format_summary(summary) + "\n")
         return RunResult(summary, best, self.trace)
+
+
+def effective_burn(model: Model, steps: int, burn: int | None) -> int:
+    """The sweeps a chain of ``steps`` leaves out of its posterior: ``burn`` (default half the
+    steps), and never fewer than the warm-up's (adaptation, annealing), whose sweeps do not
+    target the posterior."""
+    return max(steps // 2 if burn is None else burn, warmup_sweeps(model.inference))
 
 
 def read_run(out: Path) -> tuple[dict[str, Any], int]:

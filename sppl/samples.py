@@ -8,6 +8,13 @@ which a checkpoint does first, so that a power cut loses nothing before the last
 asks first: the posterior over the number of objects some camera sees (each sample's objects
 are marked seen or not), the MAP scene, the posterior over the number of objects and over
 classes, the acceptance rate per move type, and the noise scales.
+
+The posterior parts of a summary are made of the samples after burn-in only, never of the
+warm-up's (``sppl.warmup``: its adapted, annealed sweeps do not target the posterior). A run
+that has too few of them (stopped during its warm-up, or given fewer ``--steps`` than its
+burn-in) gets a summary marked ``partial``, with the reason, in ``summary.json``, at the top of
+``summary.txt`` and of the report, and in ``posterior.nc``'s attributes; with none at all it
+has no posterior numbers, only the MAP scene and the move counts.
 """
 
 from __future__ import annotations
@@ -90,6 +97,23 @@ def read_samples(path: str | Path) -> list[dict[str, Any]]:
     return out
 
 
+# A summary of fewer samples after burn-in than this is marked partial: its posterior shares are
+# multiples of 1/n too coarse to read (10% steps at 10), and R-hat and ESS are not computed below
+# 4 draws a chain.
+MIN_SAMPLES = 10
+
+
+def partial_reason(n: int, burn: int) -> str | None:
+    """Why a summary of ``n`` samples after a burn-in of ``burn`` steps is partial, or None."""
+    if n == 0:
+        return (f"no samples after the burn-in of {burn} steps, so no posterior: the run ended "
+                "before its burn-in did (more --steps, or --resume the run with more)")
+    if n < MIN_SAMPLES:
+        return (f"only {n} sample{'s' if n != 1 else ''} after the burn-in of {burn} steps "
+                f"(fewer than {MIN_SAMPLES}): the posterior below is rough")
+    return None
+
+
 def _class_key(objects: Iterable[dict]) -> str:
     names = sorted(o["class"] for o in objects)
     return " + ".join(names) if names else "(empty)"
@@ -104,8 +128,9 @@ def summarise(
     burn: int = 0,
     extra: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The run's summary from its samples after ``burn`` steps (the MAP is over all steps)."""
-    kept = [s for s in samples if s["step"] >= burn] or samples
+    """The run's summary from its samples after ``burn`` steps (the MAP is over all steps).
+    Samples before ``burn`` never enter it, however few are left (see ``partial_reason``)."""
+    kept = [s for s in samples if s["step"] >= burn]
     n = len(kept)
     count_post = Counter(len(s["objects"]) for s in kept)
     per_class = {
@@ -134,6 +159,7 @@ def summarise(
         **(extra or {}),
         "samples_used": n,
         "burn": burn,
+        "partial": partial_reason(n, burn),
         "map": map_sample,
         **seen,
         "n_objects": {str(k): v / n for k, v in sorted(count_post.items())} if n else {},
@@ -178,6 +204,8 @@ def _shares(d: dict[str, float], sep: str = ", ") -> str:
 def format_summary(summary: dict[str, Any]) -> str:
     """The summary as a few lines of text for the terminal."""
     lines = []
+    if summary.get("partial"):
+        lines.append(f"PARTIAL SUMMARY: {summary['partial']}")
     if summary.get("interrupted"):
         lines.append(f"interrupted after {summary.get('steps_done')} steps; samples so far:")
     elif summary.get("chains", 1) > 1:
@@ -206,11 +234,10 @@ def format_summary(summary: dict[str, Any]) -> str:
             lines.append(f"  {o['class']}: {params}{unseen}")
         if not m["objects"]:
             lines.append("  (no objects)")
-    seen_too = " (seen or not)" if "n_seen" in summary else ""
-    lines.append(f"number of objects{seen_too}: " + _shares(summary["n_objects"]))
-    for c, d in summary["class_counts"].items():
-        lines.append(f"  {c}: " + _shares(d))
-    lines.append("classes: " + "; ".join(f"{k}: {v:.2f}" for k, v in summary["class_sets"].items()))
+    if not summary["samples_used"]:
+        lines.append("posterior: none (no samples after burn-in)")
+    else:
+        lines += _posterior_lines(summary)
     lines.append(
         "acceptance: "
         + ", ".join(
@@ -232,3 +259,13 @@ def format_summary(summary: dict[str, Any]) -> str:
             lines.append(f"  {name}: R-hat {fmt(d['rhat'], '.3f')}, "
                          f"ESS {fmt(d['ess_bulk'], '.0f')} / {fmt(d['ess_tail'], '.0f')}")
     return "\n".join(lines)
+
+
+def _posterior_lines(summary: dict[str, Any]) -> list[str]:
+    lines = []
+    seen_too = " (seen or not)" if "n_seen" in summary else ""
+    lines.append(f"number of objects{seen_too}: " + _shares(summary["n_objects"]))
+    for c, d in summary["class_counts"].items():
+        lines.append(f"  {c}: " + _shares(d))
+    lines.append("classes: " + "; ".join(f"{k}: {v:.2f}" for k, v in summary["class_sets"].items()))
+    return lines

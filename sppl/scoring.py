@@ -180,7 +180,7 @@ class ReferenceScorer:
 def _empty_image(observed: np.ndarray, background: np.ndarray) -> float:
     """The sum of squared residuals of an image against the empty scene's, which shows the
     background everywhere."""
-    r = (observed - background).astype(np.float64)
+    r = np.subtract(observed, background, dtype=np.float64)  # exact, and summed in float64
     return float(np.sum(r * r))
 
 
@@ -312,7 +312,8 @@ class Scorer(ReferenceScorer):
             else:
                 valid = np.ones(t.observed.shape, bool) if t.valid is None else t.valid
                 observed[t.frame][1] = np.where(valid, t.observed, np.nan)
-                r = (t.observed[valid] - np.float32(t.camera.depth_max)).astype(np.float64)
+                r = np.subtract(t.observed[valid], np.float32(t.camera.depth_max),
+                                dtype=np.float64)
                 self._constant[(t.frame, t.kind)] = (int(valid.sum()), float(np.sum(r * r)))
         self._slot = {(t.frame, t.kind): (index[t.frame], 0 if t.kind == "image" else 1)
                       for t in self.terms}

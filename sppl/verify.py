@@ -92,6 +92,9 @@ class Row:
     observed: str
     p_value: float | None = None
     ok: bool = True
+    # False for a row that could not be tested (a run too short for how slowly its quantity
+    # mixes): it fails nothing, says nothing, and is shown as untested, never as a pass.
+    tested: bool = True
 
 
 @dataclass
@@ -117,8 +120,13 @@ class Report:
     @property
     def untested(self) -> list[str]:
         """The quantities a check left untested (a run too short for how slowly they mix):
-        such a row counts as a pass, but says nothing."""
-        return [r.quantity for r in self.rows if r.observed.startswith("untested")]
+        such a row fails nothing, but says nothing either (``strict`` fails on it)."""
+        return [r.quantity for r in self.rows if not r.tested]
+
+    @property
+    def passed_strict(self) -> bool:
+        """Every check passed and none was left untested (``sppl verify --strict``)."""
+        return self.passed and not self.untested
 
     @property
     def failures(self) -> list[Row]:
@@ -130,11 +138,12 @@ class Report:
                 return r
         raise KeyError(quantity)
 
-    def table(self) -> str:
+    def table(self, strict: bool = False) -> str:
+        """The report as a table and a verdict; with ``strict`` an untested row fails it."""
         head = ("check", "quantity", "expected", "observed", "p-value", "result")
         lines = [
             (r.check, r.quantity, r.expected, r.observed, _format_p(r.p_value),
-             "pass" if ok else "FAIL")
+             "FAIL" if not ok else "untested" if not r.tested else "pass")
             for r, ok in zip(self.rows, self.verdicts)
         ]
         widths = [max(len(x[i]) for x in [head, *lines]) for i in range(len(head))]
@@ -147,18 +156,26 @@ class Report:
         out = [fmt(head), fmt(tuple("-" * w for w in widths))]
         out += [fmt(x) for x in lines]
         n_stat = sum(r.p_value is not None for r in self.rows)
+        untested = [f"{r.check}: {r.quantity}" for r in self.rows if not r.tested]
         out.append("")
         out.append(
             f"{n_stat} statistical checks, decided together by Holm's correction at a "
             f"family-wise false-alarm rate of {self.alpha:g}; "
-            f"{len(self.rows) - n_stat} exact checks."
+            f"{len(self.rows) - n_stat - len(untested)} exact checks; "
+            f"{len(untested)} untested."
         )
         out += self.notes
-        if self.passed:
-            out.append("PASS: every check passed.")
-        else:
+        if not self.passed:
             names = ", ".join(f"{r.check}: {r.quantity}" for r in self.failures)
-            out.append(f"FAIL: {names}")
+            out.append(f"FAIL: {names}" + (f"; untested: {', '.join(untested)}" if untested
+                                           else ""))
+        elif untested and strict:
+            out.append(f"FAIL (--strict): untested: {', '.join(untested)}")
+        elif untested:
+            out.append(f"PASS, but {len(untested)} untested (they say nothing either way; "
+                       f"--strict fails on them): {', '.join(untested)}")
+        else:
+            out.append("PASS: every check passed.")
         return "\n".join(out)
 
 
@@ -417,7 +434,7 @@ def prior_recovery(
         if taus >= MIN_TAUS:
             return False
         rows.append(Row("prior", name, "-", f"untested: the run is {taus:.0f} autocorrelation "
-                        f"times long (< {MIN_TAUS})", None, True))
+                        f"times long (< {MIN_TAUS})", None, True, tested=False))
         untested.append(name)
         return True
 
@@ -721,6 +738,16 @@ def _finished_warmup(model: Model, rng) -> Warmup | None:
     return sampler.warmup
 
 
+def prior_scene(model: Model, rng: np.random.Generator):
+    """(objects, noise) drawn from the prior, the objects in a random order. ``sample_objects``
+    lists them class by class, and chains started only from such tuples would never test a
+    move on another order: one that depended on it (a death or a change choosing by position)
+    could pass. The scene is a set, so any order is as good a start."""
+    objects = sample_objects(model, rng)
+    objects = tuple(objects[i] for i in rng.permutation(len(objects)))
+    return objects, sample_noise(model, rng)
+
+
 def _trace_with(sampler: Sampler, objects, noise, renders, log_prior=None) -> Trace:
     """The trace of these objects under the sampler's observations, from renders already
     made (so a change of observations costs no rendering)."""
@@ -815,7 +842,7 @@ def geweke(
     data_births = [0, 0]
     for r, chain_seq in enumerate(sc_seq.spawn(chains)):
         rng = np.random.default_rng(chain_seq)
-        objs, noise = sample_objects(m, rng), sample_noise(m, rng)
+        objs, noise = prior_scene(m, rng)
         renders = sim.render(objs, noise)
         sampler = sim.sampler(sim.observe(renders, noise, rng), rng, sampler_factory, stats_,
                               warmup)
@@ -1086,7 +1113,7 @@ def sbc(
     warmup = _finished_warmup(m, np.random.default_rng(warmup_seq))
     for r, rep_seq in enumerate(replicate_seqs):
         rng = np.random.default_rng(rep_seq)
-        objs, noise = sample_objects(m, rng), sample_noise(m, rng)
+        objs, noise = prior_scene(m, rng)
         renders = sim.render(objs, noise)
         sampler = sim.sampler(sim.observe(renders, noise, rng), rng, sampler_factory,
                               warmup=warmup)

@@ -1,4 +1,5 @@
-"""Shared fixtures: the GL context (skipped locally without one, required on CI) and paths."""
+"""Shared fixtures: the GL context (skipped locally without one, required on CI), paths, and
+each statistical test's false-alarm rate (``false_alarms.py``)."""
 
 from __future__ import annotations
 
@@ -43,3 +44,35 @@ def require_gl():
 @pytest.fixture(scope="session")
 def root() -> Path:
     return ROOT
+
+
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers", "false_alarm(rate): a statistical test's false-alarm rate, its share of the "
+        "suite's budget (tests/false_alarms.py)")
+
+
+@pytest.fixture
+def false_alarm(request) -> float:
+    """The rate the test's ``false_alarm`` marker gives it, to decide its verdict with."""
+    marker = request.node.get_closest_marker("false_alarm")
+    if marker is None:
+        pytest.fail("a test that asks for its false-alarm rate needs @pytest.mark.false_alarm")
+    return float(marker.args[0])
+
+
+def pytest_collection_modifyitems(config, items):
+    """With SPPL_FALSE_ALARMS=path, write every collected test's rate (None if it states none)
+    and whether it is slow there: ``test_false_alarms.py`` reads the whole suite's so."""
+    out = os.environ.get("SPPL_FALSE_ALARMS")
+    if not out:
+        return
+    import json
+
+    rows = []
+    for item in items:
+        marker = item.get_closest_marker("false_alarm")
+        rows.append({"id": item.nodeid, "name": getattr(item, "originalname", item.name),
+                     "rate": float(marker.args[0]) if marker else None,
+                     "slow": item.get_closest_marker("slow") is not None})
+    Path(out).write_text(json.dumps(rows))

@@ -5,6 +5,7 @@ parameter space that makes (the Jacobian). Prior recovery decides whether both a
 from __future__ import annotations
 
 import pytest
+from false_alarms import EACH
 
 from sppl import moves, verify
 from sppl.errors import ModelError
@@ -39,10 +40,11 @@ def test_a_scaled_pairing_carries_the_value_times_its_factor_and_back():
     assert all(r.ok for r in verify.change_declarations(model))
 
 
-def test_prior_recovery_through_scaled_changes():
+@pytest.mark.false_alarm(EACH)
+def test_prior_recovery_through_scaled_changes(false_alarm):
     """Counts (chi-square) and the sizes' marginals (KS) with most jumps changes; false alarm
-    1% (Holm)."""
-    report = verify.prior_recovery(compile_model(SOURCE), sweeps=30_000, seed=3)
+    at the marker's rate (Holm)."""
+    report = verify.prior_recovery(compile_model(SOURCE), sweeps=30_000, seed=3, alpha=false_alarm)
     assert report.passed, report.table()
 
 
@@ -50,7 +52,7 @@ def test_prior_recovery_sees_a_change_without_its_jacobian(monkeypatch):
     """The same run with the factor's Jacobian left out of the ratio: the chain favours the
     class whose parameter space the change shrinks, and the check fails."""
     monkeypatch.setattr(moves, "log_jacobian_change", lambda old, new: 0.0)
-    report = verify.prior_recovery(compile_model(SOURCE), sweeps=30_000, seed=3)
+    report = verify.prior_recovery(compile_model(SOURCE), sweeps=30_000, seed=3, alpha=EACH)
     assert not report.passed, report.table()
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from false_alarms import EACH, SLOW_EACH
 from test_fast_scoring import _dense
 
 from sppl import moves, verify
@@ -227,11 +228,12 @@ def test_incremental_scoring_without_the_shadows_rectangles_is_caught(setting, m
 # --- the lighting moves -----------------------------------------------------------------------
 
 
-def test_prior_recovery_recovers_the_lighting_priors():
+@pytest.mark.false_alarm(EACH)
+def test_prior_recovery_recovers_the_lighting_priors(false_alarm):
     """No observations: the chain's lighting values follow their priors (KS tests, decided
-    with the rest of the report by Holm's correction; false-alarm rate 1%)."""
+    with the rest of the report by Holm's correction at the test's false-alarm rate)."""
     model = verify.with_prior_noise_steps(load_model(MODEL))
-    report = verify.prior_recovery(model, sweeps=4000, seed=2)
+    report = verify.prior_recovery(model, sweeps=4000, seed=2, alpha=false_alarm)
     for name in ("ambient", "intensity", "azimuth", "elevation", "gain"):
         row = report.row(f"{RENDER_GROUP}.{name}")
         assert row.p_value is not None, row.observed  # tested, not left out as too short
@@ -268,10 +270,12 @@ def test_lighting_moves_and_their_reverses(require_gl):
 
 
 @pytest.mark.slow
-def test_geweke_with_latent_lighting_and_shadows(require_gl):
+@pytest.mark.false_alarm(SLOW_EACH)
+def test_geweke_with_latent_lighting_and_shadows(require_gl, false_alarm):
     """The chains' lighting values stay at the prior when each sweep's observations are
-    drawn from the current state (false-alarm rate 1%, Holm)."""
-    report = verify.geweke(load_model(MODEL), chains=40, length=10, seed=3, mc_draws=2000)
+    drawn from the current state (Holm, at the test's false-alarm rate)."""
+    report = verify.geweke(load_model(MODEL), chains=40, length=10, seed=3, mc_draws=2000,
+                           alpha=false_alarm)
     assert report.passed, report.table()
 
 

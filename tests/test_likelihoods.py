@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -35,6 +36,9 @@ def test_gaussian_matches_scipy_and_masks_missing_pixels():
     )
 
 
+# The sample sd of n = 40,000 normal draws has a relative standard error sqrt(1 / 2n) = 0.0035:
+# 2% is 5.7 of them, a two-sided rate of 1.5e-8.
+@pytest.mark.false_alarm(1.5e-8)
 def test_gaussian_noise_has_the_declared_scale():
     rendered = np.zeros((200, 200), dtype=np.float32)
     noisy = Gaussian().sample(rendered, {"sigma": 0.05}, np.random.default_rng(1))
@@ -79,3 +83,42 @@ def test_scorer_equals_reference_scoring_on_the_example(root, require_gl):
     assert fast == pytest.approx(reference, rel=1e-6)
     # The true scene explains the observations better than the empty one.
     assert fast > scorer.log_likelihood(scorer.statistics(()), noise) + 1000
+
+
+def test_gaussian_statistics_sum_in_float64():
+    """A 640x480 RGB residual, float32 as renders are: the sum of squares is the exact one to
+    double rounding. Summed in float32 these are 1.4 nats off at sigma 0.05 (124 at 1080p)."""
+    rng = np.random.default_rng(7)
+    rendered = rng.random((480, 640, 3), dtype=np.float32)
+    observed = (rendered + rng.normal(0, 0.05, rendered.shape)).astype(np.float32)
+    n, ssr = Gaussian().statistics(observed, rendered, None)
+    exact = math.fsum((observed.astype(np.float64) - rendered.astype(np.float64)).ravel() ** 2)
+    assert n == rendered.size
+    assert abs(ssr - exact) <= 1e-12 * exact
+    float32_sum = float(np.dot((observed - rendered).ravel(), (observed - rendered).ravel()))
+    assert abs(float32_sum - exact) > 1e-9 * exact  # the error the float64 sum removes
+
+
+@pytest.mark.parametrize("sigma", [1e-200, 1e-160, 5e-324, 1e-100, 1e100, 1e160, 1e300])
+def test_gaussian_scores_tiny_and_huge_scales_without_exceptions(sigma):
+    """sigma * sigma underflows below 1e-154 and overflows above 1e154: scored through
+    log sigma, the density is finite or -inf, and where finite it is the exact value."""
+    g = Gaussian()
+    for n, ssr in ((10.0, 0.0), (10.0, 1e-300), (10.0, 2.5), (10.0, 1e300)):
+        value = g.log_prob(np.array([n, ssr]), {"sigma": sigma})
+        log_quad = (math.log(ssr) - 2.0 * math.log(sigma)) if ssr else -math.inf
+        if log_quad > 709.0:
+            assert value == -math.inf, (n, ssr)
+            continue
+        expected = (-0.5 * n * (math.log(2 * math.pi) + 2 * math.log(sigma))
+                    - 0.5 * math.exp(log_quad))
+        assert math.isfinite(value) and value == pytest.approx(expected, rel=1e-12), (n, ssr)
+
+
+def test_gaussian_scale_outside_its_domain_has_no_density():
+    g = Gaussian()
+    stats_ = np.array([4.0, 1.0])
+    for sigma in (0.0, -1.0, math.inf):
+        assert g.log_prob(stats_, {"sigma": sigma}) == -math.inf
+    assert math.isnan(g.log_prob(stats_, {"sigma": math.nan}))
+    assert g.log_prob(np.array([0.0, 0.0]), {"sigma": 0.0}) == 0.0  # nothing observed

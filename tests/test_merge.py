@@ -8,6 +8,8 @@ import dataclasses
 import math
 
 import numpy as np
+import pytest
+from false_alarms import EACH
 from test_verify import seen_world
 from toys import ball_class, block_class, toy_model
 
@@ -29,10 +31,11 @@ def prior_model():
     return with_merges(toy_model([placed(ball_class(rate=1.2)), placed(block_class(rate=0.8))]))
 
 
-def test_prior_recovery_with_merges_and_splits():
+@pytest.mark.false_alarm(EACH)
+def test_prior_recovery_with_merges_and_splits(false_alarm):
     """Without observations the fits climb the prior; the chain must still reproduce it
-    (counts chi-square, marginals KS; false alarm 1%, Holm)."""
-    report = verify.prior_recovery(prior_model(), sweeps=15000, seed=3)
+    (counts chi-square, marginals KS; false alarm at the marker's rate, Holm)."""
+    report = verify.prior_recovery(prior_model(), sweeps=15000, seed=3, alpha=false_alarm)
     assert report.passed, report.table()
     assert report.row("merge moves accepted").ok
     assert report.row("split moves accepted").ok
@@ -43,7 +46,7 @@ def test_prior_recovery_sees_a_newborn_taken_for_free(monkeypatch):
     merges are then favoured over splits, the chain holds too few objects, and the check
     fails."""
     monkeypatch.setattr(merge, "log_q_born", lambda sampler, obj, state: 0.0)
-    report = verify.prior_recovery(prior_model(), sweeps=15000, seed=3)
+    report = verify.prior_recovery(prior_model(), sweeps=15000, seed=3, alpha=EACH)
     assert not report.passed, report.table()
 
 
@@ -93,10 +96,11 @@ def noisy_world():
     return dataclasses.replace(world, sensors=sensors)
 
 
-def test_geweke_with_merges(require_gl):
+@pytest.mark.false_alarm(EACH)
+def test_geweke_with_merges(false_alarm, require_gl):
     """False alarm 1% (Holm)."""
     report = verify.geweke(with_merges(noisy_world(), weight=2.0), chains=100, length=20,
-                           seed=7, size=8, mc_draws=4000)
+                           seed=7, size=8, mc_draws=4000, alpha=false_alarm)
     assert report.passed, report.table()
     assert report.row("merge moves accepted").ok
     assert report.row("split moves accepted").ok

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from false_alarms import EACH, SLOW_EACH
 
 from sppl import moves
 from sppl.camera import Camera, look_at
@@ -120,9 +121,11 @@ def assert_tested(report, model, min_draws: int) -> None:
 SLOW_PRIOR_RECOVERY = {"shapes_plus"}
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow)
-                                  if n in SLOW_PRIOR_RECOVERY else n for n in sorted(VIEWS)])
-def test_prior_recovery(name):
+@pytest.mark.parametrize("name", [
+    pytest.param(n, marks=[pytest.mark.slow, pytest.mark.false_alarm(SLOW_EACH)])
+    if n in SLOW_PRIOR_RECOVERY else pytest.param(n, marks=pytest.mark.false_alarm(EACH))
+    for n in sorted(VIEWS)])
+def test_prior_recovery(false_alarm, name):
     """The model's sampler, with its noise steps widened to their priors' spread (they are
     tuned for a posterior; a random walk leaves the prior invariant at any scale), recovers
     the prior: every count, parameter and noise scale tested, none failing."""
@@ -130,26 +133,31 @@ def test_prior_recovery(name):
 
     model = verify.with_prior_noise_steps(load_model(MODELS / f"{name}.scn"))
     report = verify.prior_recovery(model, sweeps=PRIOR_SWEEPS_OF.get(name, PRIOR_SWEEPS), seed=2,
-                                   reference_draws=2000)
+                                   reference_draws=2000, alpha=false_alarm)
     assert report.passed, report.table()
     assert not report.untested, report.table()
     assert_tested(report, model, MIN_DRAWS)
 
 
 @pytest.mark.slow
+@pytest.mark.false_alarm(SLOW_EACH)
 @pytest.mark.parametrize("name", sorted(VIEWS))
-def test_prior_recovery_with_the_models_own_steps(name):
+def test_prior_recovery_with_the_models_own_steps(false_alarm, name):
     """The same with the steps the model file gives, which mix the noise scales hundreds of
     times more slowly under the prior: a run long enough to test them."""
     verify = pytest.importorskip("sppl.verify")
 
     model = load_model(MODELS / f"{name}.scn")
     report = verify.prior_recovery(model, sweeps=SLOW_PRIOR_SWEEPS[name], seed=3,
-                                   reference_draws=5000)
+                                   reference_draws=5000, alpha=false_alarm)
     assert report.passed, report.table()
     assert_tested(report, model, 60)
 
 
+# The sd of 2,000 gamma(2) draws has a relative standard error of sqrt((kurtosis - 1) / 4n)
+# = sqrt(5 / 8000) = 0.025: 15% is 6 of them, 2e-9 two-sided for each of the two noise scales
+# by the normal approximation, 1e-6 in all allowing for the skew it leaves out.
+@pytest.mark.false_alarm(1e-6)
 def test_widened_noise_steps_change_only_the_noise_steps():
     from sppl.verify import with_prior_noise_steps
 
@@ -160,7 +168,7 @@ def test_widened_noise_steps_change_only_the_noise_steps():
         for p, q in zip(sensor.noise, wide.sensors[kind].noise, strict=True):
             assert q.prior is p.prior and q.domain == p.domain
             # gamma(2, scale) has standard deviation sqrt(2) scale
-            assert q.proposal_scale == pytest.approx(math.sqrt(2) * p.prior.scale, rel=0.1)
+            assert q.proposal_scale == pytest.approx(math.sqrt(2) * p.prior.scale, rel=0.15)
             assert q.proposal_scale > 10 * p.proposal_scale
 
 

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from false_alarms import EACH
 from test_verify import seen_world
 from toys import ball_class, block_class, toy_model
 
@@ -21,11 +22,12 @@ def with_refit(model, weight=4.0):
         model.inference, jump_weights=weights))
 
 
-def test_prior_recovery_with_refits():
+@pytest.mark.false_alarm(EACH)
+def test_prior_recovery_with_refits(false_alarm):
     """Without observations the fit climbs the prior; the chain must still reproduce it
-    (counts chi-square, marginals KS; false alarm 1%, Holm)."""
+    (counts chi-square, marginals KS; false alarm at the marker's rate, Holm)."""
     model = with_refit(toy_model([ball_class(rate=0.8), block_class(rate=0.5)]))
-    report = verify.prior_recovery(model, sweeps=15000, seed=3)
+    report = verify.prior_recovery(model, sweeps=15000, seed=3, alpha=false_alarm)
     assert report.passed, report.table()
     assert report.row("refit moves accepted").ok
 
@@ -44,7 +46,7 @@ def test_prior_recovery_sees_a_refit_taken_for_symmetric(monkeypatch):
 
     monkeypatch.setattr(fit, "propose_refit", symmetric)
     model = with_refit(toy_model([ball_class(rate=0.8), block_class(rate=0.5)]))
-    report = verify.prior_recovery(model, sweeps=15000, seed=3)
+    report = verify.prior_recovery(model, sweeps=15000, seed=3, alpha=EACH)
     assert not report.passed, report.table()
 
 
@@ -56,10 +58,11 @@ def test_every_refit_and_its_reverse(require_gl):
     assert "refit: reverse undoes it" in {r.quantity for r in report.rows}
 
 
-def test_geweke_with_refits(require_gl):
+@pytest.mark.false_alarm(EACH)
+def test_geweke_with_refits(false_alarm, require_gl):
     """False alarm 1% (Holm)."""
     report = verify.geweke(with_refit(seen_world()), chains=100, length=12, seed=7, size=8,
-                           mc_draws=4000)
+                           mc_draws=4000, alpha=false_alarm)
     assert report.passed, report.table()
     assert report.row("refit moves accepted").ok
 

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from false_alarms import EACH, SLOW_EACH
 import shapely
 from scipy import stats
 
@@ -220,14 +221,16 @@ def _renderer():
     return Renderer()
 
 
-def test_prior_recovery_with_a_region():
+@pytest.mark.false_alarm(EACH)
+def test_prior_recovery_with_a_region(false_alarm):
     """With no observations the chain visits the restricted prior: each class's count is
     Poisson(lambda) (the rate is the count in the region) and its positions those of
-    rejection sampling. False alarm 1% (Holm). Leaving -log Z out of the object's prior
+    rejection sampling, decided by Holm at the test's false-alarm rate. Leaving -log Z out of the object's prior
     makes the counts Poisson(lambda Z), which the same test rejects at this seed."""
     model = model_with("region box(-1, -2, 3, 1)", jumps=LIGHT)
     one = dataclasses.replace(model, classes=model.classes[1:])  # block: rate 1, quick to mix
-    report = verify.prior_recovery(one, sweeps=4000, seed=4, reference_draws=2000)
+    report = verify.prior_recovery(one, sweeps=4000, seed=4, reference_draws=2000,
+                                   alpha=false_alarm)
     assert report.passed, report.table()
     assert "rejection" in report.row("block.x").expected
     assert report.row("count of block").p_value is not None
@@ -283,20 +286,22 @@ def test_a_change_between_classes_weighs_their_normalisers():
 
 
 @pytest.mark.slow
+@pytest.mark.false_alarm(SLOW_EACH)
 @pytest.mark.parametrize("region", [POLYGON, "region box(-1, -2, 3, 1)"])
-def test_prior_recovery_with_a_region_long(region):
+def test_prior_recovery_with_a_region_long(region, false_alarm):
     report = verify.prior_recovery(model_with(region), sweeps=40_000, seed=6,
-                                   reference_draws=10_000)
+                                   reference_draws=10_000, alpha=false_alarm)
     assert report.passed, report.table()
     assert not any("untested" in r.observed for r in report.rows), report.table()
 
 
-def test_sppl_verify_with_a_camera_region(require_gl, tmp_path, capsys):
+@pytest.mark.false_alarm(EACH)
+def test_sppl_verify_with_a_camera_region(require_gl, tmp_path, capsys, false_alarm):
     """`region cameras` is verified as the ground the verify cameras see."""
     path = tmp_path / "cameras.scn"
     path.write_text(model_with("region cameras", jumps=LIGHT).source)
     code = cli.main(["verify", str(path), "--steps", "1000", "--geweke-chains", "20",
-                     "--geweke-length", "6", "--seed", "3"])
+                     "--geweke-length", "6", "--seed", "3", "--alpha", str(false_alarm)])
     out = capsys.readouterr().out
     assert code == 0, out
     assert "the region's normaliser" in out

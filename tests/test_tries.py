@@ -8,6 +8,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from false_alarms import EACH
 from test_verify import seen_world
 from toys import ball_class, block_class, toy_model
 
@@ -21,11 +22,13 @@ def with_tries(model, m):
     return dataclasses.replace(model, inference=dataclasses.replace(model.inference, tries=m))
 
 
-def test_prior_recovery_with_multiple_tries():
-    """Counts (chi-square against Poisson) and every marginal (KS, chi-square); false alarm 1%
+@pytest.mark.false_alarm(EACH)
+def test_prior_recovery_with_multiple_tries(false_alarm):
+    """Counts (chi-square against Poisson) and every marginal (KS, chi-square); false alarm at
+    the marker's rate
     (Holm)."""
     model = with_tries(toy_model([ball_class(rate=0.8), block_class(rate=0.5)]), 4)
-    report = verify.prior_recovery(model, sweeps=6000, seed=3)
+    report = verify.prior_recovery(model, sweeps=6000, seed=3, alpha=false_alarm)
     assert report.passed, report.table()
     accepted = {r.quantity for r in report.rows if r.quantity.endswith("moves accepted")}
     assert {"birth moves accepted", "death moves accepted", "replace moves accepted"} <= accepted
@@ -38,7 +41,7 @@ def test_prior_recovery_sees_a_multiple_try_birth_without_its_mean(monkeypatch):
     monkeypatch.setattr(tries, "_log_mean",
                         lambda log_w: real(log_w) + np.log(len(log_w)))
     model = with_tries(toy_model([ball_class(rate=0.8), block_class(rate=0.5)]), 4)
-    report = verify.prior_recovery(model, sweeps=6000, seed=3)
+    report = verify.prior_recovery(model, sweeps=6000, seed=3, alpha=EACH)
     assert not report.passed, report.table()
     assert any(r.quantity.startswith("count") for r in report.failures)
 
@@ -53,11 +56,13 @@ def test_every_multiple_try_jump_and_its_reverse(require_gl):
             "replace: reverse undoes it"} <= checked, checked
 
 
-def test_geweke_with_multiple_tries(require_gl):
-    """Successive-conditional chains with 3 tries per jump stay at the prior (false alarm 1%,
+@pytest.mark.false_alarm(EACH)
+def test_geweke_with_multiple_tries(false_alarm, require_gl):
+    """Successive-conditional chains with 3 tries per jump stay at the prior (false alarm at
+    the marker's rate,
     Holm)."""
     report = verify.geweke(with_tries(seen_world(), 3), chains=100, length=12, seed=7, size=8,
-                           mc_draws=4000)
+                           mc_draws=4000, alpha=false_alarm)
     assert report.passed, report.table()
 
 

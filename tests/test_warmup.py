@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from false_alarms import EACH
 from test_verify import seen_world
 from toys import ball_class, block_class, toy_model
 
@@ -59,6 +60,9 @@ def test_factors_stay_within_their_range():
     assert w.factor("s") == pytest.approx(FACTOR_RANGE[0])
 
 
+# Its rate is assigned, not derived: 0.1 around TARGET is 7 binomial standard errors of the
+# 1,200 proposals counted, but the adapted scale's own spread from seed to seed adds to that.
+@pytest.mark.false_alarm(EACH)
 def test_adaptation_reaches_the_target_acceptance_from_a_step_far_too_large():
     """A prior chain whose declared steps are 50 times too large: without adaptation almost
     nothing is accepted; after 400 adapted sweeps, the fixed kernel accepts near TARGET."""
@@ -111,20 +115,23 @@ def test_bad_warm_up_settings_are_errors(setting, message):
 # -- the checks of sppl verify, with the warm-up on ------------------------------------------------
 
 
-def test_prior_recovery_with_adapted_steps():
+@pytest.mark.false_alarm(EACH)
+def test_prior_recovery_with_adapted_steps(false_alarm):
     """The prior is recovered by the kernel the adaptation leaves (counts chi-square and
-    parameter marginals KS; false alarm 1%, Holm)."""
+    parameter marginals KS; false alarm at the marker's rate, Holm)."""
     model = warm(toy_model([ball_class(rate=2.0), block_class(rate=0.5)]), adapt=500,
                  anneal=200)
-    report = verify.prior_recovery(model, sweeps=6000, seed=4)
+    report = verify.prior_recovery(model, sweeps=6000, seed=4, alpha=false_alarm)
     assert report.passed, report.table()
 
 
-def test_geweke_after_the_warm_up(require_gl):
+@pytest.mark.false_alarm(EACH)
+def test_geweke_after_the_warm_up(false_alarm, require_gl):
     """Adapted steps and an annealed start, then the kernel that is kept: the successive-
-    conditional chains stay at the prior (false alarm 1%, Holm)."""
+    conditional chains stay at the prior (false alarm at the marker's
+    rate, Holm)."""
     model = warm(seen_world(), adapt=200, anneal=100)
-    report = verify.geweke(model, chains=120, length=15, seed=7, size=8, mc_draws=4000)
+    report = verify.geweke(model, chains=120, length=15, seed=7, size=8, mc_draws=4000, alpha=false_alarm)
     assert report.passed, report.table()
 
 

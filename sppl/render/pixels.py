@@ -7,14 +7,15 @@ likelihood its log densities, ``shaders/likelihood.glsl``, at noise values set b
 ``set_noise``), every part
 of a primitive in one instanced draw. The read-back is two floats a pixel, inside the rectangle
 the drawn parts can reach only (every term outside it is 0), and the CPU only sums them, in
-float64, so that float32 on the GPU costs nothing in accuracy. Each camera has its own programs,
+float64: the GPU sums nothing, so float32 there costs only the rounding of each pixel's own
+terms (a few units of 2^-24 of its squares; tests/test_fast_scoring.py bounds the total). Each camera has its own programs,
 whose uniforms are set once.
 
 Every camera draws into its own framebuffer with the viewport at the origin, exactly as
 ``Renderer`` does: an offset viewport (tiles of one big framebuffer) changes the rounding of
 window coordinates, and thin triangles then cover different pixels. With the same arithmetic
 and the same culling the terms are those of the reference path's read-back images, pixel for
-pixel (the tests hold the two to 1e-4). Drawing the cameras of one size as the layers of one
+pixel (the tests hold the two to that rounding). Drawing the cameras of one size as the layers of one
 framebuffer keeps that rounding, but measured slower on llvmpipe (``docs/scoring.md``).
 
 Rendering a region only (a scissor rectangle per camera) is what incremental scoring uses: the
