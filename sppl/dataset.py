@@ -29,6 +29,7 @@ from .checkpoint import CHECKPOINT, model_fingerprint, observations_fingerprint
 from .errors import ObservationError, Span, SpplError, UsageError
 from .model import Model
 from .observations import load_observations
+from .run import CHECKPOINT_SECONDS
 
 DATASET_RECORD = "dataset.json"
 TASK_RECORD = "task.json"  # in a task's chain folder: which worker ran it, and how many times
@@ -316,7 +317,7 @@ def run_dataset(
     thin: int = 1,
     burn: int | None = None,
     executor=None,
-    checkpoint_seconds: float = 30.0,
+    checkpoint_seconds: float = CHECKPOINT_SECONDS,
     progress: bool | None = None,
     on_scene: Callable[[str, str], None] | None = None,
     prepare_out: Callable[[], None] | None = None,
