@@ -57,7 +57,7 @@ from .errors import SpplError
 from .likelihoods import get_likelihood, sample_observation
 from .model import RENDER_GROUP, Model
 from .observations import CameraSpec, Frame, Observations
-from .region import bind_region
+from .region import CamerasRegion, bind_region
 from .scoring import PriorScorer, Scorer
 from .simulate import sample_noise, sample_objects
 from .trace import Trace
@@ -650,7 +650,11 @@ def _exact_test(draws, par, rng) -> tuple[str, float] | None:
 
 def for_checks(model: Model) -> Model:
     """``model`` with a ``region cameras`` taken as the ground the verify cameras see (sized
-    by the unrestricted prior): the checks need a region before any observation is made."""
+    by the unrestricted prior): the checks need a region before any observation is made. Any
+    other model is returned as it is, its prior not drawn from here (a broken prior is the
+    checks' to report, row by row)."""
+    if not isinstance(model.region, CamerasRegion):
+        return model
     return bind_region(model, [spec.camera for spec in verify_cameras(model)])
 
 

@@ -139,7 +139,7 @@ def _shapes_chain(root, sampler_class, sweeps=120):
     model = load_model(root / "models" / "shapes.scn")
     obs = load_observations(root / "examples" / "three_shapes" / "obs")
     sampler = sampler_class(model, Scorer(model, obs, Renderer(model.render)),
-                            np.random.default_rng(4))
+                            np.random.default_rng(8))
     trace, states = sampler.initial_trace(), []
     for _ in range(sweeps):
         trace = sampler.sweep(trace)

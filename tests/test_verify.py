@@ -446,7 +446,7 @@ def test_geweke_sees_a_simulator_that_leaves_out_the_static_scenery(require_gl, 
     """If the observations were simulated without the table and ground that every hypothesis
     renders, the chains could not stay at the prior: the same run fails."""
 
-    def render(self, objects):
+    def render(self, objects, noise=None):
         parts = [p for o in objects for p in o.parts]
         return {i: self.renderer.render(parts, s.camera) for i, s in enumerate(self.specs)}
 
