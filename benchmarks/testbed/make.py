@@ -4,6 +4,7 @@ scenes rendered by sppl, each as an observation folder with its true scene.
     pip install '.[cycles]'
     python benchmarks/testbed/make.py              # every scene (about a minute)
     python benchmarks/testbed/make.py --only blocks_shadows
+    python benchmarks/testbed/make.py --sppl-only  # sppl's renders only, after a model changes
 
 Scenes: for each model, a few drawn from its prior with a fixed seed, with 1 to 5 objects
 whose centres are all inside both cameras' images (the prior conditioned on the count and
@@ -36,18 +37,22 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent))
 
 from sppl.cli import main as sppl  # noqa: E402
 from sppl.lang import load_model  # noqa: E402
 from sppl.observations import load_cameras  # noqa: E402
-from sppl.trace import counts_allowed, make_object, scene_is_valid  # noqa: E402
+from scenes_in_view import draw_in_view  # noqa: E402
 
 SEED = 2024
 MAX_OBJECTS = 5
-MARGIN = 6  # pixels: an object's centre at least this far inside every image
 # How many scenes each model draws from its prior.
 DRAWN = {"blocks": 5, "shapes": 2}
 SIGMA = 0.02
+# The ambient share with which sppl's shading comes closest to Cycles' sky light (render_cycles'
+# WORLD_LIGHT) on the test bed's blocks.scn scenes, the light's intensity set to keep the lit
+# floor as bright (benchmarks/testbed/calibrate.py); blocks.scn ships the same values.
+CYCLES_AMBIENT = 0.6
 
 # What the prior rarely draws, by hand. "renderer": {"light": ...} moves Cycles' sun.
 LOW_SUN = [-0.2, 1.0, 0.55]  # from the far side, 29 degrees up: shadows fall towards the cameras
@@ -89,40 +94,18 @@ def cameras_of(model_name: str) -> Path:
     return ROOT / "examples" / "models" / model_name / "cameras.json"
 
 
-def in_view(objects, cameras) -> bool:
-    """Every object's centre (its parts' mean, half way up) inside every camera's image."""
-    for o in objects:
-        centre = np.mean([p.matrix[:3] @ (0.0, 0.0, 0.5, 1.0) for p in o.parts], axis=0)
-        for spec in cameras:
-            cam = spec.camera
-            (u, v), depth = (a[0] for a in cam.project(centre))
-            if not (depth > 0 and MARGIN <= u <= cam.width - MARGIN
-                    and MARGIN <= v <= cam.height - MARGIN):
-                return False
-    return True
-
-
 def drawn_scenes(model_name: str, n: int, seed: int) -> dict[str, dict]:
     """``n`` scenes from the model's prior conditioned on their objects being in view, with
     1, 2, ... objects (the count is set, not drawn: the prior conditioned on view holds
-    mostly empty scenes, and the hand-written cases have an empty one). Given the count,
-    each object's class is drawn by the classes' rates and its parameters from its prior
-    until it is in view, and whole scenes are redrawn until no two objects overlap: the
-    prior conditioned on the count and on every object in view."""
+    mostly empty scenes, and the hand-written cases have an empty one); see
+    benchmarks/scenes_in_view.py."""
     model = load_model(ROOT / "models" / f"{model_name}.scn")
     cameras = load_cameras(cameras_of(model_name))
     rng = np.random.default_rng(np.random.SeedSequence([seed, sorted(DRAWN).index(model_name)]))
-    rates = np.array([c.rate for c in model.classes], dtype=float)
     scenes = {}
     while len(scenes) < n:
-        objects = []
-        for _ in range(1 + len(scenes) % MAX_OBJECTS):
-            cls = model.classes[rng.choice(len(rates), p=rates / rates.sum())]
-            while not in_view([o := make_object(model, cls, cls.sample_prior(rng))], cameras):
-                pass
-            objects.append(o)
-        if counts_allowed(model, objects) and scene_is_valid(objects):
-            scenes[f"prior{len(scenes)}"] = {"objects": [o.as_dict() for o in objects]}
+        objects = draw_in_view(model, cameras, 1 + len(scenes) % MAX_OBJECTS, rng)
+        scenes[f"prior{len(scenes)}"] = {"objects": [o.as_dict() for o in objects]}
     return scenes
 
 
@@ -138,19 +121,44 @@ def all_scenes(seed: int = SEED) -> list[dict]:
     return index
 
 
-def make(entry: dict, out: Path, seed: int) -> None:
-    from render_cycles import render_folder
+def simulation_noise(model, scene: dict) -> dict:
+    """The noise and lighting values ``sppl simulate`` renders the scene with: the sensors'
+    true Gaussian scale, no outliers (a robust likelihood's outlier share at 0 draws exactly
+    the Gaussian noise Cycles' folder has), and, where the model leaves the lighting latent,
+    the light Cycles' sun shines from and the ambient share that matches its sky (CYCLES_AMBIENT)."""
+    from sppl.model import RENDER_GROUP
 
+    noise = {}
+    for kind, parameters in model.noise_groups:
+        if kind == RENDER_GROUP:
+            light = np.asarray(scene.get("renderer", {}).get("light", model.render.light), float)
+            x, y, z = light / np.linalg.norm(light)
+            direction = {"azimuth": float(np.arctan2(y, x)), "elevation": float(np.arcsin(z)),
+                         "ambient": CYCLES_AMBIENT}
+            noise[kind] = {p.name: direction.get(p.name, getattr(model.render, p.name))
+                           for p in parameters}
+        else:
+            noise[kind] = {p.name: SIGMA if p.name == "sigma" else 0.0 for p in parameters}
+    return noise
+
+
+def make(entry: dict, out: Path, seed: int, cycles: bool = True) -> None:
     folder = out / entry["name"]
-    if folder.exists():
-        shutil.rmtree(folder)
     with tempfile.TemporaryDirectory() as tmp:
         scene_file = Path(tmp) / "scene.json"
         scene_file.write_text(json.dumps(entry["scene"]))
         log = io.StringIO()
-        # Blender prints every sample's progress on the C side: it goes to the terminal.
-        render_folder(ROOT / entry["model"], ROOT / entry["cameras"], scene_file,
-                      folder / "cycles", seed=seed, sigma=SIGMA)
+        if cycles:
+            from render_cycles import render_folder
+
+            if folder.exists():
+                shutil.rmtree(folder)
+            # Blender prints every sample's progress on the C side: it goes to the terminal.
+            render_folder(ROOT / entry["model"], ROOT / entry["cameras"], scene_file,
+                          folder / "cycles", seed=seed, sigma=SIGMA)
+        model = load_model(ROOT / entry["model"])
+        scene_file.write_text(json.dumps({**entry["scene"],
+                                          "noise": simulation_noise(model, entry["scene"])}))
         with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
             code = sppl(["simulate", str(ROOT / entry["model"]), "--cameras",
                          str(ROOT / entry["cameras"]), "--scene", str(scene_file), "--out",
@@ -165,13 +173,16 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, default=HERE)
     p.add_argument("--only", nargs="+", help="scene names (default: every one)")
     p.add_argument("--seed", type=int, default=SEED)
+    p.add_argument("--sppl-only", action="store_true",
+                   help="render the sppl/ folders only (no bpy needed): after a model's "
+                        "appearance or lighting changes; Cycles' renders do not depend on them")
     args = p.parse_args(argv)
     index = all_scenes(args.seed)
     (args.out / "scenes.json").write_text(json.dumps(index, indent=2) + "\n")
     for i, entry in enumerate(index):
         if args.only and entry["name"] not in args.only:
             continue
-        make(entry, args.out, args.seed + i)
+        make(entry, args.out, args.seed + i, cycles=not args.sppl_only)
         print(f"{entry['name']}: {len(entry['scene']['objects'])} objects", flush=True)
     return 0
 
