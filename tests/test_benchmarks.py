@@ -44,3 +44,34 @@ def test_testbed_benchmark_report_and_figure(root, require_gl, tmp_path):
     figure = tmp_path / "figure.png"
     bench(root, "testbed/figure.py", run, "--scenes", "blocks_empty", "--out", figure)
     assert figure.stat().st_size > 0
+
+
+def test_prior_scenes_benchmark_runs_and_draws_scenes_in_view(root, require_gl, tmp_path):
+    """benchmarks/prior_scenes.py on one scene for a few CPU seconds: its table and rows; and
+    its scenes hold 2, 3, ... objects, each a valid scene with every object in view."""
+    run = tmp_path / "run.json"
+    out = bench(root, "prior_scenes.py", "--models", "shapes", "--scenes", "1", "--limit", "2",
+                "--check-every", "20", "--json", run)
+    assert "| shapes | " in out and "/1 |" in out
+    rows = __import__("json").loads(run.read_text())
+    assert [(r["model"], r["objects"]) for r in rows] == [("shapes", 2)]
+
+    sys.path.insert(0, str(root / "benchmarks"))
+    try:
+        import prior_scenes
+        from scenes_in_view import in_view
+    finally:
+        sys.path.remove(str(root / "benchmarks"))
+    from sppl.lang import load_model
+    from sppl.observations import load_cameras
+    from sppl.simulate import objects_from_dict
+    from sppl.trace import scene_is_valid
+
+    model = load_model(root / "models" / "blocks.scn")
+    cameras = load_cameras(root / "examples" / "models" / "blocks" / "cameras.json")
+    scenes = prior_scenes.scenes_of("blocks", 6, prior_scenes.SEED)
+    assert [len(s["objects"]) for s in scenes] == [2, 3, 4, 5, 6, 2]
+    for s in scenes:
+        objects = objects_from_dict(model, s)
+        assert scene_is_valid(objects) and in_view(objects, cameras)
+    assert scenes == prior_scenes.scenes_of("blocks", 6, prior_scenes.SEED)  # a fixed seed
