@@ -38,16 +38,16 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
 
-from scenes_in_view import draw_in_view  # noqa: E402
-from time_to_solution import solve  # noqa: E402
+from scenes_in_view import draw_in_view
+from time_to_solution import solve
 
-from sppl.chain import Sampler  # noqa: E402
-from sppl.experiment import simulate  # noqa: E402
-from sppl.lang import load_model  # noqa: E402
-from sppl.observations import load_cameras, load_observations  # noqa: E402
-from sppl.render import Renderer  # noqa: E402
-from sppl.scoring import Scorer  # noqa: E402
-from sppl.simulate import load_scene  # noqa: E402
+from sppl.chain import Sampler
+from sppl.experiment import simulate
+from sppl.lang import load_model
+from sppl.observations import load_cameras, load_observations
+from sppl.render import Renderer
+from sppl.scoring import Scorer
+from sppl.simulate import load_scene
 
 MODELS = ("shapes", "blocks", "tabletop", "shapes_plus")
 SEED = 2026
@@ -120,7 +120,7 @@ def totals(rows: list[dict], limit: float) -> str:
     for name in dict.fromkeys(r["model"] for r in rows):
         mine = [r for r in rows if r["model"] == name]
         secs = sorted(r["seconds"] if r["solved"] else float("inf") for r in mine)
-        fmt = lambda v: f"{v:.1f}" if v != float("inf") else f"> {limit:.0f}"  # noqa: E731
+        fmt = lambda v: f"{v:.1f}" if v != float("inf") else f"> {limit:.0f}"
         gaps = [r["gap"] for r in mine if not r["solved"]]
         gap = f"{statistics.median(gaps):+,.0f}" if gaps else "-"
         lines.append(f"| {name} | {sum(r['solved'] for r in mine)}/{len(mine)} | "

@@ -34,10 +34,10 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 sys.path.insert(0, str(ROOT))
 
-from sppl.lang import compile_model  # noqa: E402
-from sppl.observations import load_observations  # noqa: E402
-from sppl.render import Renderer  # noqa: E402
-from sppl.simulate import objects_from_dict  # noqa: E402
+from sppl.lang import compile_model
+from sppl.observations import load_observations
+from sppl.render import Renderer
+from sppl.simulate import objects_from_dict
 
 MODEL = ROOT / "models" / "blocks.scn"
 LAMBERT_FLOOR = 0.894  # the floor's lambert term under blocks.scn's light (0.4, -0.3, 1)

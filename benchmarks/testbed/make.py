@@ -39,10 +39,11 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent))
 
-from sppl.cli import main as sppl  # noqa: E402
-from sppl.lang import load_model  # noqa: E402
-from sppl.observations import load_cameras  # noqa: E402
-from scenes_in_view import draw_in_view  # noqa: E402
+from scenes_in_view import draw_in_view
+
+from sppl.cli import main as sppl
+from sppl.lang import load_model
+from sppl.observations import load_cameras
 
 SEED = 2024
 MAX_OBJECTS = 5
