@@ -61,7 +61,15 @@ def test_folder_loads_with_its_true_scene(name, renderer):
     model = load_model(ROOT / e["model"])
     objects, noise = load_scene(model, folder / "scene.json")
     assert [o.as_dict() for o in objects] == e["scene"]["objects"]
-    assert noise == {"image": {"sigma": SIGMA}, "depth": {"sigma": SIGMA}}
+    # Both folders carry the sensors' true Gaussian noise; sppl's also the values its model's
+    # other noise parameters and latent lighting were rendered with (make.simulation_noise).
+    assert noise["image"]["sigma"] == noise["depth"]["sigma"] == SIGMA
+    if renderer == "cycles":
+        assert noise == {"image": {"sigma": SIGMA}, "depth": {"sigma": SIGMA}}
+    else:
+        assert {k for k, _ in model.noise_groups} == set(noise)
+        assert all(v == 0.0 for k in ("image", "depth") for n, v in noise[k].items()
+                   if n == "outlier")
 
 
 def depth_agreement(frame, model, objects, renderer):
