@@ -38,7 +38,7 @@ from sppl.render import Renderer, renderer_string
 from sppl.scoring import Scorer
 from sppl.simulate import render_observations, sample_objects
 
-NOISE = {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}}
+NOISE = {"image": {"sigma": 0.05, "outlier": 0.01}, "depth": {"sigma": 0.05, "outlier": 0.01}}  # blocks.scn: mixtures
 
 
 def cameras(n: int, size: int) -> list[CameraSpec]:
