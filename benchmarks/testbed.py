@@ -57,7 +57,7 @@ def scenes(names=None) -> list[dict]:
 
 def run_one(entry: dict, renderer: str, args) -> dict:
     folder = TESTBED / entry["name"] / renderer
-    model = load_model(ROOT / entry["model"])
+    model = load_model(args.model or ROOT / entry["model"])
     truth_file = json.loads((folder / "scene.json").read_text())
     truth = truth_file["objects"]
     r = solve(model, load_observations(folder), truth, args.seed, args.steps, args.limit,
@@ -125,6 +125,9 @@ def main(argv=None) -> int:
     p.add_argument("--steps", type=int, default=None, help="sweeps per chain (default 20,000)")
     p.add_argument("--quick", action="store_true",
                    help=f"only {' and '.join(QUICK_SCENES)}, 300 sweeps (unless --steps)")
+    p.add_argument("--model", type=Path, default=None,
+                   help="sample with this model file instead of each scene's shipped one (to "
+                   "measure other settings; give scenes of that model only)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--limit", type=float, default=3600.0, help="seconds per chain at most")
     p.add_argument("--check-every", type=int, default=100)

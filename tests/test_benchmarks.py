@@ -75,3 +75,19 @@ def test_prior_scenes_benchmark_runs_and_draws_scenes_in_view(root, require_gl, 
         objects = objects_from_dict(model, s)
         assert scene_is_valid(objects) and in_view(objects, cameras)
     assert scenes == prior_scenes.scenes_of("blocks", 6, prior_scenes.SEED)  # a fixed seed
+
+
+def test_blocks_appearance_reads_cycles_renders_better_than_the_old_one(root, require_gl):
+    """calibrate.py's check: with blocks.scn's shipped material factors and lighting, fewer of
+    the test bed's objects have their true (material, colour) outscored by a wrong pair in
+    Cycles' renders than with the factors it had before (rubber 0.8, metal 1.2, ambient 0.35,
+    no shadows), which inverted rubber and metal."""
+    import re
+
+    def wrong(*args):
+        out = bench(root, "testbed/calibrate.py", "--check", *args)
+        n, total = map(int, re.search(r"outscores: (\d+)/(\d+)", out).groups())
+        assert total >= 20
+        return n / total
+
+    assert wrong(1, 0.7, 0.6) < 0.25 < 0.9 < wrong(0.8, 1.2, 0.35, "--no-shadows")
