@@ -35,10 +35,10 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
 
-from time_to_solution import solve  # noqa: E402
+from time_to_solution import solve
 
-from sppl.lang import load_model  # noqa: E402
-from sppl.observations import load_observations  # noqa: E402
+from sppl.lang import load_model
+from sppl.observations import load_observations
 
 TESTBED = HERE / "testbed"
 RENDERERS = ("cycles", "sppl")
@@ -110,7 +110,7 @@ def print_totals(rows: list[dict], renderers) -> None:
         firsts = [r["first_right_seconds"] for r in ok if r["first_right_seconds"] is not None]
         within = [r for r in ok if r["depth_sigma"] is not None and r["depth_sigma_true"]
                   and r["depth_sigma_true"] / 3 <= r["depth_sigma"] <= 3 * r["depth_sigma_true"]]
-        med = lambda vs: f"{statistics.median(vs):.3f}" if vs else "-"  # noqa: E731
+        med = lambda vs: f"{statistics.median(vs):.3f}" if vs else "-"
         print(f"| {name} | {len(ok)}/{len(rs)} | "
               f"{(f'{statistics.median(firsts):.1f}' if firsts else '-')} | "
               f"{med([r['image_sigma'] for r in rs if r['image_sigma'] is not None])} | "
