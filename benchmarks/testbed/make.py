@@ -136,8 +136,8 @@ def simulation_noise(model, scene: dict) -> dict:
             x, y, z = light / np.linalg.norm(light)
             direction = {"azimuth": float(np.arctan2(y, x)), "elevation": float(np.arcsin(z)),
                          "ambient": CYCLES_AMBIENT}
-            noise[kind] = {p.name: direction.get(p.name, getattr(model.render, p.name))
-                           for p in parameters}
+            noise[kind] = {p.name: direction[p.name] if p.name in direction
+                           else getattr(model.render, p.name) for p in parameters}
         else:
             noise[kind] = {p.name: SIGMA if p.name == "sigma" else 0.0 for p in parameters}
     return noise
