@@ -36,6 +36,11 @@ COLOUR_GAP = 0.15
 # At most this many points describe a state (an even stride over the unexplained pixels), so
 # that the density costs microseconds.
 MAX_POINTS = 400
+# A blob of unexplained pixels seeds a fitted birth when it has this many pixels, and a state
+# has at most this many seeds (its largest blobs), so that a fitted death's choice among them
+# stays a short list.
+SEED_PIXELS = 4
+MAX_SEEDS = 8
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
@@ -55,15 +60,23 @@ class BirthProposal:
     # -- the points a state leaves unexplained ----------------------------------------------
 
     def points(self, trace) -> np.ndarray:
-        if self.weight == 0.0 or trace.renders is None:
+        if self.weight == 0.0:
             return np.empty((0, 2))
-        cached = trace.cache.get("birth_points")
-        if cached is None:
-            cached = trace.cache["birth_points"] = self._points(trace.renders)
-        return cached
+        return _cached(trace, "birth_points", self._points)
 
     def _points(self, renders) -> np.ndarray:
-        found = []
+        found = [pts for _, pts in self._unexplained(renders)]
+        pts = np.concatenate(found) if found else np.empty((0, 2))
+        if len(pts) > MAX_POINTS:
+            pts = pts[:: math.ceil(len(pts) / MAX_POINTS)]
+        return pts
+
+    def _unexplained(self, renders):
+        """Per camera term, the labelled blobs of pixels the render leaves unexplained and
+        the ground points (x, y) of those pixels, in the order ``labels[labels > 0]`` reads
+        them: a depth pixel back-projected with its measured depth, an RGB pixel's ray
+        followed down to the ground (an RGB pixel whose ray never meets the ground is
+        dropped, label and all)."""
         for t in self.terms:
             dirs, ray_to_z, centre = self.rays[t.frame]
             rendered = self.scorer.rendered(renders, t)
@@ -78,18 +91,34 @@ class BirthProposal:
                     dist = dist / ray_to_z[near]
                 pts = centre + dirs[near] * dist[:, None]
             elif t.kind == "image":
-                off = _blobs(np.abs(t.observed - rendered).mean(axis=-1) > COLOUR_GAP)
-                d = dirs[off]
-                down = d[:, 2] < -1e-6
-                s = -centre[2] / d[down, 2]
-                pts = centre + d[down] * s[:, None]
+                near = _blobs(np.abs(t.observed - rendered).mean(axis=-1) > COLOUR_GAP)
+                near &= dirs[..., 2] < -1e-6
+                d = dirs[near]
+                s = -centre[2] / d[:, 2]
+                pts = centre + d * s[:, None]
             else:
                 continue
-            found.append(pts[:, :2])
-        pts = np.concatenate(found) if found else np.empty((0, 2))
-        if len(pts) > MAX_POINTS:
-            pts = pts[:: math.ceil(len(pts) / MAX_POINTS)]
-        return pts
+            yield near, pts[:, :2]
+
+    def seeds(self, trace) -> np.ndarray:
+        """Ground points (S, 2) where whole objects seem to be missing from ``trace``: per
+        camera, each blob of at least SEED_PIXELS unexplained pixels gives the median of its
+        pixels' ground points; the largest MAX_SEEDS blobs over all cameras, largest first.
+        A deterministic function of the state's renders, as a fitted birth's density needs
+        (sppl.fitted_birth)."""
+        return _cached(trace, "birth_seeds", self._seeds)
+
+    def _seeds(self, renders) -> np.ndarray:
+        found = []  # (pixels, order found, point)
+        for mask, pts in self._unexplained(renders):
+            labels, count = ndimage.label(mask, structure=_CROSS)
+            of_pixel = labels[mask]
+            for blob in range(1, count + 1):
+                mine = pts[of_pixel == blob]
+                if len(mine) >= SEED_PIXELS:
+                    found.append((len(mine), len(found), np.median(mine, axis=0)))
+        found.sort(key=lambda f: (-f[0], f[1]))
+        return np.array([f[2] for f in found[:MAX_SEEDS]]).reshape(-1, 2)
 
     # -- sampling and density ------------------------------------------------------------------
 
@@ -122,6 +151,16 @@ class BirthProposal:
 
 
 _CROSS = ndimage.generate_binary_structure(2, 1)
+
+
+def _cached(trace, key: str, compute) -> np.ndarray:
+    """``compute(trace.renders)``, kept in the trace's cache; no points without renders."""
+    if trace.renders is None:
+        return np.empty((0, 2))
+    cached = trace.cache.get(key)
+    if cached is None:
+        cached = trace.cache[key] = compute(trace.renders)
+    return cached
 
 
 def _blobs(mask: np.ndarray) -> np.ndarray:

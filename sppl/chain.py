@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import fit, merge, moves, tries
+from . import fit, fitted_birth, merge, moves, tries
 from .birth import BirthProposal
 from .model import Model
 from .region import bind_region
@@ -364,6 +364,10 @@ class Sampler:
             return merge.propose_merge(self, trace, self.rng)
         if kind == "split":
             return merge.propose_split(self, trace, self.rng)
+        if kind == "fitted_birth":
+            return fitted_birth.propose_fitted_birth(self, trace, self.rng)
+        if kind == "fitted_death":
+            return fitted_birth.propose_fitted_death(self, trace, self.rng)
         if kind == "change":
             return moves.propose_change(self.model, trace, self.rng)
         m = self.model.inference.tries

@@ -228,10 +228,12 @@ class InferenceSettings:
     data_birth_spread: float = 0.25
     # Relative weights of the model jumps. The thesis has birth, death and change, equally
     # weighted; replace (sppl.moves.propose_replace) is sppl's addition.
-    # refit (sppl.fit), merge and split (sppl.merge) are off unless a model weighs them.
+    # refit (sppl.fit), merge and split (sppl.merge), fitted_birth and fitted_death
+    # (sppl.fitted_birth) are off unless a model weighs them.
     jump_weights: Mapping[str, float] = field(
         default_factory=lambda: {"birth": 1.0, "death": 1.0, "change": 1.0, "replace": 1.0,
-                                 "refit": 0.0, "merge": 0.0, "split": 0.0}
+                                 "refit": 0.0, "merge": 0.0, "split": 0.0,
+                                 "fitted_birth": 0.0, "fitted_death": 0.0}
     )
     # The warm-up (sppl/warmup.py): sweeps of proposal-scale adaptation, and of an annealed
     # likelihood rising from the power anneal_from to 1; both are burned and then stop.

@@ -25,7 +25,8 @@ from .birth import BirthProposal
 from .model import RENDER_GROUP, Model, ObjectClass
 from .trace import SceneObject, Trace, make_object
 
-JUMPS = ("birth", "death", "change", "replace", "refit", "merge", "split")
+JUMPS = ("birth", "death", "change", "replace", "refit", "merge", "split", "fitted_birth",
+         "fitted_death")
 
 
 @dataclass(frozen=True, eq=False)

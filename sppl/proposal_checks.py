@@ -437,7 +437,7 @@ def check_proposals(model: Model, *, seed=0, size: int = 16, draws: int = 150,
                 rows += birth_rows(sampler, state, cls, rng, draws, weights)
     else:
         notes.append("proposals: births do not look at the observations (data_birth = 0).")
-    if _uses(sampler, "refit", "merge", "split"):
+    if _uses(sampler, "refit", "merge", "split", "fitted_birth", "fitted_death"):
         for cls in model.classes:
             rows += refit_rows(sampler, state, cls, missing, rng, draws, weights)
     if _uses(sampler, "merge", "split"):

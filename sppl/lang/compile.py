@@ -88,6 +88,7 @@ _NONNEGATIVE = ("ambient", "intensity", "gain", "red", "blue")
 _INFERENCE_KEYS = ("p_jump", "data_birth", "data_birth_spread", "adapt", "anneal", "anneal_from",
                    "tries")
 _JUMPS = tuple(InferenceSettings().jump_weights)
+_REVERSE_JUMPS = (("birth", "death"), ("merge", "split"), ("fitted_birth", "fitted_death"))
 _CLASS_SETTINGS = ("count", "max_count")
 
 
@@ -1062,9 +1063,12 @@ class _Compiler(ImportsMixin, ShapesMixin):
                 elif weight is not None:
                     self.jump_weights[key] = weight
         weights = {**InferenceSettings().jump_weights, **self.jump_weights}
-        # Birth and death are each other's reverse: one without the other cannot be balanced.
-        if (weights["birth"] > 0) != (weights["death"] > 0):
-            self.error("birth and death need both a positive weight or both zero", node.span)
+        # Each pair is each other's reverse: one without the other cannot be balanced.
+        unpaired = next(((a, b) for a, b in _REVERSE_JUMPS
+                         if (weights[a] > 0) != (weights[b] > 0)), None)
+        if unpaired is not None:
+            self.error(f"{unpaired[0]} and {unpaired[1]} need both a positive weight or both "
+                       "zero", node.span)
         elif not any(weights.values()):
             self.error("at least one jump weight must be positive", node.span)
 

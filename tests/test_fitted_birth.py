@@ -1,0 +1,147 @@
+"""Fitted births and their deaths (sppl/fitted_birth.py): a whole object fitted to a blob of
+unexplained pixels. Where the seeds fall, that the fit finds a missing object, that each move
+and its reverse have opposite ratios, and, against the exact posterior, that the chain stays
+there with them and drifts when the fitted density is left out."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from false_alarms import EACH
+from test_birth import setting  # noqa: F401 (a fixture)
+from test_merge import noisy_world
+from test_proposal_checks import flat_world
+from test_verify import seen_world
+
+from sppl import fit as fitting
+from sppl import fitted_birth, moves, verify
+from sppl import proposal_checks as pc
+from sppl.chain import Sampler
+from sppl.trace import make_object
+
+
+def with_fitted(model, weight=3.0):
+    weights = {**model.inference.jump_weights, "fitted_birth": weight, "fitted_death": weight}
+    return dataclasses.replace(model, inference=dataclasses.replace(
+        model.inference, jump_weights=weights))
+
+
+def test_seeds_sit_on_the_missing_objects(setting):  # noqa: F811
+    """From the empty scene, each true object has a seed within a third of a metre (a seed
+    is the median of a blob's ground points: the depth camera's lie on the object's near
+    side), and every seed is near one of them."""
+    model, truth, sampler = setting
+    empty = sampler.make_trace((), {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}})
+    seeds = sampler.birth.seeds(empty)
+    assert 2 <= len(seeds) <= 8
+    centres = np.array([(o.values["x"], o.values["y"]) for o in truth])
+    dist = np.linalg.norm(seeds[:, None, :] - centres[None], axis=-1)
+    assert np.all(dist.min(axis=0) < 0.35), seeds
+    assert np.all(dist.min(axis=1) < 0.6), seeds
+    # With every object in place nothing is left to seed.
+    full = sampler.make_trace(truth, empty.noise)
+    assert len(sampler.birth.seeds(full)) == 0
+
+
+def test_a_fitted_birth_finds_the_missing_object(setting):  # noqa: F811
+    """With the blue sphere missing, fitted births propose it: of 12, several have the right
+    class and colour within 0.1 m, and such a proposal is accepted."""
+    model, truth, shared = setting
+    sampler = Sampler(with_fitted(model), shared.scorer, np.random.default_rng(1))
+    state = sampler.make_trace(truth[:1], {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}})
+    rng = np.random.default_rng(3)
+    sphere = truth[1]
+    hits, accepted = 0, 0
+    for _ in range(12):
+        p = fitted_birth.propose_fitted_birth(sampler, state, rng)
+        obj = p.changed[0]
+        if obj.cls.name == "sphere" and obj.values["c"] == sphere.values["c"] and math.hypot(
+                obj.values["x"] - sphere.values["x"], obj.values["y"] - sphere.values["y"]) < 0.1:
+            hits += 1
+            new = sampler.evaluate(state, p)
+            accepted += new is not None and sampler.log_alpha(state, p, new) > 0
+    assert hits >= 2 and accepted >= 1
+
+
+def test_the_seed_choice_is_a_distribution_that_prefers_the_nearest():
+    model = with_fitted(seen_world())
+    ball = model.classes[0]
+    obj = make_object(model, ball, {"x": 0.1, "y": 0.0, "r": 0.3, "c": "red"})
+    seeds = np.array([[0.0, 0.0], [1.5, 0.0], [0.0, -2.0]])
+    log_rho = fitted_birth.seed_log_probs(seeds, obj)
+    assert math.isclose(np.exp(log_rho).sum(), 1.0)
+    assert log_rho[0] > log_rho[1] > log_rho[2] >= math.log(fitted_birth.FLOOR / 3)
+
+
+def test_every_fitted_birth_and_death_and_its_reverse(require_gl):
+    """Against observations (24x24 cameras, so that objects leave blobs to seed): the
+    reverse, through the same scene without the object, gives back the trace with minus the
+    log ratio."""
+    report = verify.move_checks(with_fitted(seen_world()), states=20, seed=5, size=24)
+    assert report.passed, report.table()
+    counts = {r.quantity: r.observed for r in report.rows}
+    for move in ("fitted_birth", "fitted_death"):
+        assert int(counts[f"{move}: reverse undoes it"].split("/")[1].split()[0]) >= 5
+
+
+def fitted_tile():
+    """verify's one-tile world (tests/test_proposal_checks.py) with fitted births and deaths
+    the only jumps: the count moves by them alone."""
+    return flat_world("tile", (1.6, 1.6), 1.5, 0.6, ("fitted_birth", "fitted_death"), 1)
+
+
+def tile_report():
+    model = fitted_tile()
+    truth = (make_object(model, model.classes[0], {"x": 0.3, "y": -0.2}),)
+    return pc.joint_check(model, truth, {"image": {"sigma": 0.6}}, chains=200, length=8,
+                          cells=31, size=8, p_empty=0.5, alpha=EACH, seed=0)
+
+
+@pytest.mark.false_alarm(EACH)
+def test_the_chain_stays_at_the_exact_posterior_with_fitted_births(require_gl):
+    """Short chains from exact posterior draws, counts moved by fitted births and deaths
+    only: the count, the tile's place and the noise against the exact posterior (false alarm
+    at the marker's rate, Holm)."""
+    report = tile_report()
+    assert report.passed, report.table()
+    assert "fitted_birth" in report.notes[-1]
+
+
+def test_the_exact_posterior_sees_a_fitted_density_left_out(require_gl, monkeypatch):
+    """The same run with the fitted density left out of both ratios (as if the fit's draw
+    cost nothing to propose): fitted deaths win over births, the empty scene gains about a
+    quarter of the mass, and the count's chi-square fails (p near 1e-12 on this seed)."""
+    monkeypatch.setattr(fitting, "log_density", lambda cls, values, fitted: 0.0)
+    monkeypatch.setattr(fitting, "log_density_bound", lambda cls, values: 0.0)
+    report = tile_report()
+    assert not report.passed, report.table()
+    assert report.row("objects in the scene").p_value < 1e-8, report.table()
+
+
+@pytest.mark.slow
+@pytest.mark.false_alarm(EACH)
+def test_geweke_with_fitted_births(false_alarm, require_gl):
+    """With noise ten times the verify world's (so that fitted births and deaths are
+    accepted now and then) on 16x16 images (so that objects leave blobs to seed). False
+    alarm at the marker's rate (Holm)."""
+    report = verify.geweke(with_fitted(noisy_world()), chains=100, length=12, seed=7, size=16,
+                           mc_draws=4000, alpha=false_alarm)
+    assert report.passed, report.table()
+    assert report.row("fitted_birth moves accepted").ok
+
+
+def test_a_model_weighs_fitted_births():
+    from sppl.lang import compile_model
+
+    model = compile_model("class ball { count ~ poisson(1) x : real ~ normal(0, 1)\n"
+                          "y : real ~ normal(0, 1)\n"
+                          "geometry sphere(0.2) at (x, y) colour rgb(1, 0, 0) }\n"
+                          "inference { jump_weights birth = 1, death = 1, fitted_birth = 2, "
+                          "fitted_death = 2 }")
+    assert model.inference.jump_weights["fitted_birth"] == 2.0
+    assert model.inference.jump_weights["fitted_death"] == 2.0
+    # replace keeps its default weight 1; a change needs a second class.
+    assert moves.jump_probabilities(model)["fitted_birth"] == pytest.approx(2 / 7)
