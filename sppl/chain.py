@@ -120,6 +120,9 @@ class Sampler:
         self.jump = moves.jump_probabilities(model)
         self.birth = BirthProposal(model, scorer if getattr(scorer, "terms", None) else None)
         self.warmup = Warmup.of(model.inference)
+        # The power of the likelihood this chain targets: 1 but in a tempered ladder's hotter
+        # chains (sppl.tempering).
+        self.power = 1.0
 
     # -- states --------------------------------------------------------------------------------
 
@@ -266,7 +269,7 @@ class Sampler:
 
     def known_log_alpha(self, trace: Trace, proposal: moves.Proposal, new: Trace) -> float:
         """``log_alpha`` less the proposal's deferred part."""
-        beta = self.warmup.beta
+        beta = self.warmup.beta * self.power
         if beta == 1.0:
             log_alpha = new.score - trace.score
         else:

@@ -138,9 +138,9 @@ def propose_fitted_death(sampler, trace: Trace, rng: np.random.Generator, k: int
         return None
     k = int(rng.integers(n)) if k is None else k
     gone = trace.objects[k]
-    classes = placed_classes(sampler.model)
-    if gone.cls not in classes:
+    if not gone.cls.position:
         return None
+    classes = placed_classes(sampler.model)
     rest = trace.objects[:k] + trace.objects[k + 1 :]
     state = state if state is not None else _full(sampler, trace, rest)
     seeds = sampler.birth.seeds(state)

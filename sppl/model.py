@@ -242,6 +242,10 @@ class InferenceSettings:
     anneal_from: float = 0.01
     # Candidates a birth, death or replace weighs at once (sppl/tries.py); 1: single tries.
     tries: int = 1
+    # Parallel tempering (sppl/tempering.py): chains in the ladder, the posterior's included
+    # (1: none), and the hottest one's power of the likelihood.
+    tempered: int = 1
+    tempered_from: float = 0.05
 
 
 # The render block's parameters a model may leave uncertain, each a latent choice with a prior

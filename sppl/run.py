@@ -15,7 +15,6 @@ import numpy as np
 from tqdm import tqdm
 
 from . import __version__
-from .chain import Sampler
 from .checkpoint import (
     CHECKPOINT,
     capture,
@@ -32,6 +31,7 @@ from .observations import Observations
 from .samples import SampleWriter, format_summary, read_samples, summarise, truncate_samples
 from .scoring import Scorer
 from .seen import SeenCache
+from .tempering import make_sampler
 from .warmup import warmup_sweeps
 
 
@@ -168,7 +168,7 @@ class ChainRun:
             seed_sequence = seed
         rng = np.random.default_rng(seed_sequence)
         self.seed = _seed_record(seed)
-        self.sampler = sampler = Sampler(model, scorer, rng)
+        self.sampler = sampler = make_sampler(model, scorer, rng)
         # Which objects some camera sees, worked out for the samples written (sppl.seen).
         self.seen = SeenCache(model, observations.cameras)
         burn_option, self.burn = burn, effective_burn(model, steps, burn)

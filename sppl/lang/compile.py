@@ -86,7 +86,7 @@ _RENDER_KEYS = ("background", "ambient", "light", "intensity", "gain", "red", "b
 # Lighting parameters whose values must be at least 0 (ambient also at most 1).
 _NONNEGATIVE = ("ambient", "intensity", "gain", "red", "blue")
 _INFERENCE_KEYS = ("p_jump", "data_birth", "data_birth_spread", "adapt", "anneal", "anneal_from",
-                   "tries")
+                   "tries", "tempered", "tempered_from")
 _JUMPS = tuple(InferenceSettings().jump_weights)
 _REVERSE_JUMPS = (("birth", "death"), ("merge", "split"), ("fitted_birth", "fitted_death"))
 _CLASS_SETTINGS = ("count", "max_count")
@@ -1037,11 +1037,14 @@ class _Compiler(ImportsMixin, ShapesMixin):
                 elif key == "tries" and not (value >= 1 and value == int(value)):
                     self.error(f"`tries` is a number of candidates, at least 1, got {value:g}",
                                item.value.span)
-                elif key == "anneal_from" and not 0.0 < value <= 1.0:
-                    self.error(f"`anneal_from` is a power of the likelihood in (0, 1], got "
+                elif key == "tempered" and not (value >= 1 and value == int(value)):
+                    self.error(f"`tempered` is a number of chains, at least 1, got {value:g}",
+                               item.value.span, "1 switches tempering off")
+                elif key in ("anneal_from", "tempered_from") and not 0.0 < value <= 1.0:
+                    self.error(f"`{key}` is a power of the likelihood in (0, 1], got "
                                f"{value:g}", item.value.span)
                 else:
-                    if key in ("adapt", "anneal", "tries"):
+                    if key in ("adapt", "anneal", "tries", "tempered"):
                         value = int(value)
                     self.inference[key] = value
 
