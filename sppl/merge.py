@@ -1,5 +1,5 @@
-"""The merge and split jumps: two objects that share one object's pixels become one fitted
-object, and one object becomes a fitted object and a newborn.
+"""The merge and split jumps: two or three objects that share one object's pixels become one
+fitted object, and one object becomes a fitted object and one or two newborns.
 
 A chain that explained a cube with two smaller cubes early on cannot leave that explanation one
 object at a time: the death of either small cube uncovers half the cube's pixels and costs
@@ -29,6 +29,16 @@ depend on are the same both ways, and with K classes
 fitted are roles the move chooses, not part of the scene; a merge with its roles is undone by
 exactly one split with the same roles, which is all detailed balance needs. The places in the
 tuple are uniform, as for a birth, and carry no density. docs/inference.md has the derivation.
+
+Three small objects on one large object's pixels need more: a merge of two of them fits the
+large object with the third still standing inside it, which the no-overlap constraint or the
+likelihood rejects. So a merge takes away m objects besides j, m uniform in 1..min(MAX_TAKEN,
+n - 1): i as above, then each further one among those not yet chosen with probability
+w(j, l) / sum over them, and a split gives m newborns (m uniform in 1..MAX_TAKEN), each a
+birth into the same x-. The ratio above gains, in the merge's density, 1 / min(MAX_TAKEN,
+n - 1) and each further choice's probability, and in the split's 1 / MAX_TAKEN, one K and one
+q_birth per newborn; the newborns in the order drawn are the merged-away objects in the
+order chosen.
 """
 
 from __future__ import annotations
@@ -49,6 +59,11 @@ from .trace import SceneObject, Trace, make_object
 # cone's tip is near it in the image only.
 RADIUS = 0.5
 PIXELS = 4.0
+# A merge takes away one to MAX_TAKEN objects besides the one it fits, and a split gives one
+# to MAX_TAKEN newborns: three small objects that share one large object's pixels become it
+# in one move, where two merges one after the other would each leave an object overlapping
+# the fit.
+MAX_TAKEN = 2
 
 
 def partner_log_weights(objects, i: int, screen=None) -> np.ndarray:
@@ -97,24 +112,26 @@ def screen_of(sampler):
 @dataclass(frozen=True)
 class MergeSplit:
     """What a merge or split used, for its reverse: the scene x- without the objects it took
-    out, and the places, in the tuple that has both, of the fitted object and of the other
-    one (the merged-away object, or the newborn)."""
+    out, and the places, in the tuple that has them all, of the fitted object and of the
+    others (the merged-away objects, or the newborns, in the order they were chosen)."""
 
     state: Trace
     fitted_place: int
-    other_place: int
+    other_places: tuple[int, ...]
 
     def reverse(self, sampler, before: Trace, proposal: Proposal, after: Trace) -> Proposal:
-        # The place of the single object, in the tuple without the other one.
-        single = self.fitted_place - (self.other_place < self.fitted_place)
         if proposal.move == "merge":
+            # The place of the single object, in the tuple without the others.
+            single = self.fitted_place - sum(p < self.fitted_place for p in self.other_places)
             return propose_split(sampler, after, sampler.rng, k=single, state=self.state,
                                  fitted=before.objects[self.fitted_place],
-                                 born=before.objects[self.other_place],
-                                 born_place=self.other_place)
-        return propose_merge(sampler, after, sampler.rng, i=self.other_place,
-                             j=self.fitted_place, state=self.state,
-                             target=before.objects[single])
+                                 born=tuple(before.objects[p] for p in self.other_places),
+                                 born_places=self.other_places)
+        return propose_merge(sampler, after, sampler.rng, i=self.other_places[0],
+                             j=self.fitted_place, more=self.other_places[1:],
+                             state=self.state, target=before.objects[
+                                 self.fitted_place - sum(p < self.fitted_place
+                                                         for p in self.other_places)])
 
 
 def log_q_born(sampler, obj: SceneObject, state: Trace) -> float:
@@ -139,37 +156,74 @@ def _refitted(sampler, state: Trace, like: SceneObject, rng: np.random.Generator
     return target, forward
 
 
+def taken_counts(n: int) -> int:
+    """How many numbers of merged-away objects a merge of ``n`` objects chooses among
+    (uniformly): 1 to MAX_TAKEN, and at most n - 1."""
+    return min(MAX_TAKEN, n - 1)
+
+
+def more_log_probs(logw_j: np.ndarray, excluded) -> np.ndarray:
+    """log P of each place as the next merged-away object after the first: by its weight
+    from the fitted object j (``logw_j``, -inf at j), among the places not yet chosen."""
+    logw = logw_j.copy()
+    logw[list(excluded)] = -math.inf
+    return logw - np.logaddexp.reduce(logw)
+
+
+def chosen_log_prob(logw_i, logw_j, i: int, j: int, more) -> float:
+    """log P of choosing the fitted object j after the first merged-away i, and then the
+    other merged-away objects ``more`` in that order."""
+    total, excluded = float(logw_i[j]), [i]
+    for p in more:
+        total += float(more_log_probs(logw_j, excluded)[p])
+        excluded.append(p)
+    return total
+
+
 def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None = None,
                   j: int | None = None, state: Trace | None = None,
-                  target: SceneObject | None = None) -> Proposal | None:
-    """Merge object i (uniform) into object j (near it) as a fitted object of a uniform
-    class; given ``target``, the proposal of exactly that object (a split's reverse)."""
+                  target: SceneObject | None = None, more: tuple[int, ...] | None = None
+                  ) -> Proposal | None:
+    """Merge object i (uniform), and with it MORE - 1 further objects near j (MORE uniform in
+    1..``taken_counts``), into object j (near i) as a fitted object of a uniform class; given
+    ``target`` (and ``more``), the proposal of exactly that object (a split's reverse)."""
     objects = trace.objects
     n = len(objects)
     if n < 2:
         return None
     model = sampler.model
     n_classes = len(model.classes)
+    screen = screen_of(sampler)
     i = int(rng.integers(n)) if i is None else i
-    logw = partner_log_weights(objects, i, screen_of(sampler))
+    logw = partner_log_weights(objects, i, screen)
     if j is None:
         j = int(rng.choice(n, p=np.exp(logw)))
-    gone, old = objects[i], objects[j]
-    rest = _without(objects, i, j)
+    logw_j = partner_log_weights(objects, j, screen)
+    if more is None:
+        count = 1 + int(rng.integers(taken_counts(n)))
+        more = []
+        for _ in range(count - 1):
+            p = np.exp(more_log_probs(logw_j, [i, *more]))
+            more.append(int(rng.choice(n, p=p / p.sum())))
+    more = tuple(more)
+    taken = (i, *more)
+    gone, old = [objects[p] for p in taken], objects[j]
+    rest = _without(objects, j, *taken)
     state = state if state is not None else sampler.make_trace(rest, trace.noise)
     new, forward = _refitted(sampler, state, old, rng, target)
     cls = new.cls
-    merged = objects[:j] + (new,) + objects[j + 1 :]
-    merged = merged[:i] + merged[i + 1 :]
-    tag = MergeSplit(state, j, i)
+    merged = tuple(new if p == j else o for p, o in enumerate(objects) if p not in taken)
+    tag = MergeSplit(state, j, taken)
     if not math.isfinite(new.log_prior):
         return Proposal("merge", old.cls.name, merged, trace.noise, (new,), -math.inf, tries=tag)
-    log_q_forward = (_log(sampler.jump["merge"]) - math.log(n) + float(logw[j])
+    log_q_forward = (_log(sampler.jump["merge"]) - math.log(n)
+                     - math.log(taken_counts(n)) + chosen_log_prob(logw, logw_j, i, j, more)
                      - math.log(n_classes)
                      + fitting.log_mixture(sampler, state, cls, new.values, forward))
     # log q(reverse), less the fitted density of old, which is deferred (Sampler.decide).
-    log_q_back = (_log(sampler.jump["split"]) - math.log(n - 1) - 2 * math.log(n_classes)
-                  + log_q_born(sampler, gone, state))
+    log_q_back = (_log(sampler.jump["split"]) - math.log(len(merged)) - math.log(MAX_TAKEN)
+                  - (1 + len(taken)) * math.log(n_classes)
+                  + sum(log_q_born(sampler, o, state) for o in gone))
     back, bound = fitting.refitted_back(sampler, state, old, new)
     return Proposal("merge", old.cls.name, merged, trace.noise, (new,),
                     log_q_back - log_q_forward, tries=tag, deferred=back, deferred_bound=bound)
@@ -177,11 +231,12 @@ def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None
 
 def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None = None,
                   state: Trace | None = None, fitted: SceneObject | None = None,
-                  born: SceneObject | None = None, born_place: int | None = None
-                  ) -> Proposal | None:
-    """Split object k (uniform) into a fitted object of a uniform class in its place and a
-    birth of a uniform class; given ``fitted`` and ``born`` (and ``born_place``), the
-    proposal of exactly those (a merge's reverse)."""
+                  born: tuple[SceneObject, ...] | None = None,
+                  born_places: tuple[int, ...] | None = None) -> Proposal | None:
+    """Split object k (uniform) into a fitted object of a uniform class in its place and
+    MORE births of uniform classes (MORE uniform in 1..MAX_TAKEN); given ``fitted``,
+    ``born`` and ``born_places`` (their places in the split tuple), the proposal of exactly
+    those (a merge's reverse)."""
     objects = trace.objects
     m = len(objects)
     if m < 1:
@@ -193,26 +248,39 @@ def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None
     rest = _without(objects, k)
     state = state if state is not None else sampler.make_trace(rest, trace.noise)
     fitted, forward = _refitted(sampler, state, old, rng, fitted)
-    if born is None:
-        born_cls = model.classes[int(rng.integers(n_classes))]
-        born = make_object(model, born_cls, sampler.birth.sample(born_cls, state, rng))
-        born_place = int(rng.integers(m + 1))
     replaced = objects[:k] + (fitted,) + objects[k + 1 :]
-    split = replaced[:born_place] + (born,) + replaced[born_place:]
-    j = k + (born_place <= k)  # the fitted object's place with the newborn in
-    tag = MergeSplit(state, j, born_place)
-    if not (math.isfinite(fitted.log_prior) and math.isfinite(born.log_prior)):
-        return Proposal("split", old.cls.name, split, trace.noise, (fitted, born), -math.inf,
+    if born is None:
+        born, split = [], list(replaced)
+        for _ in range(1 + int(rng.integers(MAX_TAKEN))):
+            cls = model.classes[int(rng.integers(n_classes))]
+            obj = make_object(model, cls, sampler.birth.sample(cls, state, rng))
+            born.append(obj)
+            split.insert(int(rng.integers(len(split) + 1)), obj)
+        born = tuple(born)
+        born_places = tuple(next(p for p, o in enumerate(split) if o is b) for b in born)
+        split = tuple(split)
+    else:
+        slots = iter(replaced)
+        by_place = dict(zip(born_places, born))
+        split = tuple(by_place[p] if p in by_place else next(slots)
+                      for p in range(len(replaced) + len(born)))
+    j = next(p for p, o in enumerate(split) if o is fitted)
+    tag = MergeSplit(state, j, born_places)
+    if not (math.isfinite(fitted.log_prior) and all(math.isfinite(b.log_prior) for b in born)):
+        return Proposal("split", old.cls.name, split, trace.noise, (fitted, *born), -math.inf,
                         tries=tag)
-    n = m + 1
-    log_q_forward = (_log(sampler.jump["split"]) - math.log(m) - 2 * math.log(n_classes)
+    n = len(split)
+    log_q_forward = (_log(sampler.jump["split"]) - math.log(m) - math.log(MAX_TAKEN)
+                     - (1 + len(born)) * math.log(n_classes)
                      + fitting.log_mixture(sampler, state, fitted.cls, fitted.values, forward)
-                     + log_q_born(sampler, born, state))
-    logw = partner_log_weights(split, born_place, screen_of(sampler))
+                     + sum(log_q_born(sampler, b, state) for b in born))
+    screen = screen_of(sampler)
+    i, more = born_places[0], born_places[1:]
+    logw = partner_log_weights(split, i, screen)
+    logw_j = partner_log_weights(split, j, screen)
     # log q(reverse), less the fitted density of old, which is deferred (Sampler.decide).
-    log_q_back = (_log(sampler.jump["merge"]) - math.log(n) + float(logw[j])
-                  - math.log(n_classes))
+    log_q_back = (_log(sampler.jump["merge"]) - math.log(n) - math.log(taken_counts(n))
+                  + chosen_log_prob(logw, logw_j, i, j, more) - math.log(n_classes))
     back, bound = fitting.refitted_back(sampler, state, old, fitted)
-    return Proposal("split", old.cls.name, split, trace.noise, (fitted, born),
+    return Proposal("split", old.cls.name, split, trace.noise, (fitted, *born),
                     log_q_back - log_q_forward, tries=tag, deferred=back, deferred_bound=bound)
-

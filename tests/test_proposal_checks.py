@@ -170,13 +170,13 @@ def _partners_drawn_right(monkeypatch, wrong):
     split's reverse) use ``wrong``."""
     right_weights, right_merge = merge.partner_log_weights, merge.propose_merge
 
-    def propose_merge(sampler, trace, rng, i=None, j=None, state=None, target=None):
+    def propose_merge(sampler, trace, rng, i=None, j=None, state=None, target=None, more=None):
         n = len(trace.objects)
         if n >= 2 and j is None:
             i = int(rng.integers(n)) if i is None else i
             p = np.exp(right_weights(trace.objects, i, merge.screen_of(sampler)))
             j = int(rng.choice(n, p=p))
-        return right_merge(sampler, trace, rng, i=i, j=j, state=state, target=target)
+        return right_merge(sampler, trace, rng, i=i, j=j, state=state, target=target, more=more)
 
     monkeypatch.setattr(merge, "partner_log_weights", wrong)
     monkeypatch.setattr(merge, "propose_merge", propose_merge)
