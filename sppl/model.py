@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .distributions import Categorical, Distribution
+from .distributions import Distribution
 from .domains import Domain, is_continuous
 from .geometry import Part, footprint_of
 
@@ -347,6 +347,3 @@ class Model:
             groups += ((RENDER_GROUP, self.render.latent),)
         return groups
 
-
-def uniform_categorical(values: tuple[str, ...]) -> Categorical:
-    return Categorical(values, tuple(1.0 / len(values) for _ in values))

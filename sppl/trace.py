@@ -29,14 +29,6 @@ import shapely
 from .geometry import Part, footprints_overlap, ground_points
 from .model import Model, ObjectClass
 
-Address = tuple
-
-
-@dataclass(frozen=True)
-class Choice:
-    value: Any
-    log_prob: float
-
 
 @dataclass(frozen=True, eq=False)
 class SceneObject:
@@ -166,25 +158,6 @@ class Trace:
         for o in self.objects:
             c[o.cls.name] += 1
         return c
-
-    def choices(self) -> dict[Address, Choice]:
-        """Every random choice at its address, with its log-probability.
-
-        Object addresses use the object's position in ``objects``; they name a choice within
-        this trace only, since the scene itself is unordered.
-        """
-        out: dict[Address, Choice] = {}
-        for i, o in enumerate(self.objects):
-            out[("object", i, "class")] = Choice(o.cls.name, math.log(o.cls.rate))
-            for p in o.cls.parameters:
-                out[("object", i, p.name)] = Choice(
-                    o.values[p.name], p.log_prob(o.values[p.name], o.values)
-                )
-        for kind, parameters in self.model.noise_groups:
-            for p in parameters:
-                value = self.noise[kind][p.name]
-                out[("noise", kind, p.name)] = Choice(value, p.log_prob(value))
-        return out
 
     def as_dict(self, seen: list[bool] | None = None) -> dict[str, Any]:
         """The scene as plain data; ``seen``, if given, marks each object seen or not."""

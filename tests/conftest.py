@@ -41,6 +41,18 @@ def require_gl():
         pytest.skip(f"no headless OpenGL context on this machine: {error}")
 
 
+@pytest.fixture
+def registered():
+    """``register_likelihood`` for one test: the registry is as it was once the test ends,
+    so a likelihood a test makes up is never seen by another."""
+    from sppl import likelihoods
+
+    saved = dict(likelihoods._registry)
+    yield likelihoods.register_likelihood
+    likelihoods._registry.clear()
+    likelihoods._registry.update(saved)
+
+
 @pytest.fixture(scope="session")
 def root() -> Path:
     return ROOT

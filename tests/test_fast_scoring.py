@@ -20,7 +20,7 @@ import pytest
 from sppl.camera import Camera, focal_from_fov, look_at
 from sppl.chain import Sampler
 from sppl.lang import load_model
-from sppl.likelihoods import Gaussian, gpu_statistics, register_likelihood
+from sppl.likelihoods import Gaussian, gpu_statistics
 from sppl.model import Sensor
 from sppl.observations import CameraSpec, Observations
 from sppl.render import Renderer
@@ -296,7 +296,8 @@ def test_a_camera_inside_an_object_sees_its_inside_on_both_paths(require_gl, roo
     assert np.all(rgb != np.asarray(model.render.background, "f4"))  # the sphere's inside
 
 
-def test_a_likelihood_without_gl_statistics_falls_back_to_the_reference(require_gl, root):
+def test_a_likelihood_without_gl_statistics_falls_back_to_the_reference(require_gl, root,
+                                                                       registered):
     class AbsoluteResidual(Gaussian):
         """Statistics of its own: the GL side has no version of them."""
 
@@ -311,8 +312,8 @@ def test_a_likelihood_without_gl_statistics_falls_back_to_the_reference(require_
         def log_prob(self, stats, noise):
             return super().log_prob(stats, noise) - 1.0
 
-    register_likelihood("test-absolute", AbsoluteResidual)
-    register_likelihood("test-heavier", Heavier)
+    registered("test-absolute", AbsoluteResidual)
+    registered("test-heavier", Heavier)
     assert gpu_statistics(AbsoluteResidual()) is None
     assert gpu_statistics(Heavier()) == "squared_residual"
     model, renderer, obs, truth, noise = _setting(root, "shapes.scn")

@@ -33,7 +33,7 @@ def test_seeds_sit_on_the_missing_objects(setting):  # noqa: F811
     """From the empty scene, each true object has a seed within a third of a metre (a seed
     is the median of a blob's ground points: the depth camera's lie on the object's near
     side), and every seed is near one of them."""
-    model, truth, sampler = setting
+    _, truth, sampler = setting
     empty = sampler.make_trace((), {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}})
     seeds = sampler.birth.seeds(empty)
     assert 2 <= len(seeds) <= 8

@@ -13,7 +13,7 @@ from sppl.distributions import Categorical, Gamma, Normal, Uniform
 from sppl.domains import Finite, Interval, Periodic, Positive, Real
 from sppl.errors import ModelError, ModelErrors
 from sppl.lang import ast, compile_model, load_model, parse
-from sppl.likelihoods import Gaussian, register_likelihood
+from sppl.likelihoods import Gaussian
 from sppl.model import InferenceSettings
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
@@ -661,7 +661,9 @@ class _ScaledGaussian(Gaussian):
         self.gain, self.offset = gain, offset
 
 
-register_likelihood("scaled_gaussian", _ScaledGaussian)
+@pytest.fixture(autouse=True)
+def _scaled_gaussian(registered):
+    registered("scaled_gaussian", _ScaledGaussian)
 
 
 def test_sensor_options_and_noise_steps():

@@ -11,7 +11,7 @@ from scipy import stats
 
 from sppl.errors import SpplError
 from sppl.lang import load_model
-from sppl.likelihoods import Gaussian, available_likelihoods, get_likelihood, register_likelihood
+from sppl.likelihoods import Gaussian, available_likelihoods, get_likelihood
 from sppl.observations import load_observations
 from sppl.render import Renderer
 from sppl.scoring import Scorer
@@ -45,7 +45,7 @@ def test_gaussian_noise_has_the_declared_scale():
     assert noisy.std() == pytest.approx(0.05, rel=0.02)
 
 
-def test_registry_finds_by_name_and_reports_unknown_names():
+def test_registry_finds_by_name_and_reports_unknown_names(registered):
     assert "gaussian" in available_likelihoods()
     assert isinstance(get_likelihood("gaussian"), Gaussian)
     with pytest.raises(SpplError, match="unknown likelihood 'gausian'.*gaussian"):
@@ -55,14 +55,19 @@ def test_registry_finds_by_name_and_reports_unknown_names():
         def log_prob(self, stats_, noise):  # not a real Laplace: only the lookup matters here
             return 0.0
 
-    register_likelihood("test-laplace", Laplace)
+    registered("test-laplace", Laplace)
     assert isinstance(get_likelihood("test-laplace"), Laplace)
 
 
-def test_scorer_equals_reference_scoring_on_the_example(root, require_gl):
+def test_scorer_equals_reference_scoring_on_the_example(root, require_gl, tmp_path):
     """The fast path (GL render, cached statistics) against numpy/scipy scoring of the same
-    renders, on the shipped example's true scene."""
-    model = load_model(root / "models" / "shapes.scn")
+    renders, on the shipped example's true scene, with Gaussian likelihoods on both sensors
+    (the shipped model's depth mixture has its own twin tests, tests/test_robust.py)."""
+    text = (root / "models" / "shapes.scn").read_text()
+    gaussian = tmp_path / "shapes_gaussian.scn"
+    gaussian.write_text(text.replace("likelihood mixture(outlier = 0.01)", "likelihood gaussian"))
+    model = load_model(gaussian)
+    assert model.sensors["depth"].likelihood == "gaussian"
     obs = load_observations(root / "examples" / "three_shapes" / "obs")
     truth = json.loads((root / "examples" / "three_shapes" / "scene.json").read_text())
     objects = objects_from_dict(model, truth)

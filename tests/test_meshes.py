@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +11,7 @@ import shapely
 from sppl.camera import Camera, look_at
 from sppl.errors import RenderError
 from sppl.geometry import MESH_PREFIX, Part, footprint_of, load_mesh, unit_mesh
-from sppl.render import Renderer, gl_context, raycast
+from sppl.render import Renderer, raycast
 
 MUG = Path(__file__).resolve().parent.parent / "models" / "meshes" / "mug.obj"
 NAME = MESH_PREFIX + str(MUG)
@@ -33,17 +32,7 @@ def test_a_file_that_is_not_a_mesh(tmp_path):
         load_mesh(str(junk))
 
 
-@pytest.fixture
-def gl():
-    try:
-        gl_context()
-    except RenderError as error:
-        if os.environ.get("CI") == "true":
-            pytest.fail(f"CI must be able to render: {error}")
-        pytest.skip(f"no headless OpenGL context on this machine: {error}")
-
-
-def test_a_mesh_is_uploaded_on_first_use_and_matches_the_ray_caster(gl):
+def test_a_mesh_is_uploaded_on_first_use_and_matches_the_ray_caster(require_gl):
     camera = Camera(
         "c", 40, 30, 60.0, 60.0, 20.0, 15.0, look_at((0.25, -0.25, 0.25), (0.0, 0.0, 0.05))
     )
@@ -65,7 +54,7 @@ def test_a_mesh_is_uploaded_on_first_use_and_matches_the_ray_caster(gl):
     assert (depth < camera.depth_max).sum() > 200  # the mug is in view
 
 
-def test_an_unknown_primitive_is_still_an_error(gl):
+def test_an_unknown_primitive_is_still_an_error(require_gl):
     renderer = Renderer()
     try:
         with pytest.raises(RenderError, match="unknown primitive 'torus'"):
@@ -140,7 +129,7 @@ def test_a_mesh_in_another_format_compiles_to_the_obj_shape(meshes_in_every_form
 
 
 @pytest.mark.parametrize("name", ("mug", "box"))
-def test_every_format_renders_like_the_obj(meshes_in_every_format, name, gl):
+def test_every_format_renders_like_the_obj(meshes_in_every_format, name, require_gl):
     from sppl.lang import load_model
 
     _, models = meshes_in_every_format

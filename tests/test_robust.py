@@ -22,7 +22,7 @@ from sppl import cli, verify
 from sppl.chain import Sampler
 from sppl.errors import SpplError
 from sppl.lang import load_model
-from sppl.likelihoods import get_likelihood, gpu_statistics, register_likelihood
+from sppl.likelihoods import get_likelihood, gpu_statistics
 from sppl.lockstep import sweep_together
 from sppl.model import RENDER_GROUP
 from sppl.observations import load_observations
@@ -439,10 +439,10 @@ def test_sppl_verify_passes_with_the_mixture(require_gl, capsys, false_alarm):
     assert "noise: reverse undoes it" in out
 
 
-def test_sppl_verify_catches_a_misnormalised_mixture(require_gl, capsys):
+def test_sppl_verify_catches_a_misnormalised_mixture(require_gl, capsys, registered):
     """The deliberately wrong density: Geweke's test names the outlier share (p about 1e-9
     at this seed, where the table's threshold is 1% over all its rows)."""
-    register_likelihood("misnormalised_mixture", MisnormalisedMixture)
+    registered("misnormalised_mixture", MisnormalisedMixture)
     code = cli.main(["verify", str(FIXTURES / "broken_mixture.scn"), "--steps", "500",
                      "--geweke-chains", "40", "--geweke-length", "8", "--seed", "0"])
     out = capsys.readouterr().out

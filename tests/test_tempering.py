@@ -10,6 +10,7 @@ there; a swap with a wrong ratio moves the counts between rungs."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import math
 
@@ -17,8 +18,11 @@ import numpy as np
 import pytest
 from false_alarms import EACH
 from scipy import stats
-from test_resume import SEED, STEPS
-from test_resume import setup  # noqa: F401 (a fixture)
+from test_resume import (
+    SEED,
+    STEPS,
+    setup,  # noqa: F401 (a fixture)
+)
 from toys import ball_class, toy_model
 
 from sppl import tempering
@@ -102,7 +106,7 @@ def test_the_ladder_is_geometric_from_the_posterior():
     assert tempering.ladder(1, 0.1) == [1.0]
     powers = tempering.ladder(4, 0.001)
     assert powers[0] == 1.0 and math.isclose(powers[-1], 0.001)
-    assert all(math.isclose(a / b, 10.0) for a, b in zip(powers, powers[1:]))
+    assert all(math.isclose(a / b, 10.0) for a, b in itertools.pairwise(powers))
 
 
 @pytest.mark.false_alarm(EACH)

@@ -26,7 +26,7 @@ from sppl.distributions import Categorical, Gamma, Normal, Uniform
 from sppl.domains import Finite, Interval, Periodic, Positive, Real
 from sppl.geometry import Part, rotation_z, scaling, translation
 from sppl.lang import load_model
-from sppl.likelihoods import Gaussian, register_likelihood
+from sppl.likelihoods import Gaussian
 from sppl.model import InferenceSettings, Model, ObjectClass, Parameter, Sensor
 from sppl.scoring import PriorScorer
 
@@ -464,8 +464,8 @@ class DoubledNoise(Gaussian):
         return super().sample(rendered, {"sigma": 2.0 * noise["sigma"]}, rng)
 
 
-def test_geweke_rejects_a_likelihood_whose_sampler_disagrees(require_gl):
-    register_likelihood("doubled_noise", DoubledNoise)
+def test_geweke_rejects_a_likelihood_whose_sampler_disagrees(require_gl, registered):
+    registered("doubled_noise", DoubledNoise)
     report = verify.geweke(seen_world(image="doubled_noise"), chains=60, length=15, seed=7,
                            mc_draws=2000, alpha=EACH)
     assert "image.sigma" in [r.quantity for r in report.failures], report.table()
@@ -599,10 +599,11 @@ def test_sppl_verify_strict_exits_1_on_an_untested_row(root, capsys, monkeypatch
     assert "FAIL (--strict): untested: prior: image.sigma" in capsys.readouterr().out
 
 
-def test_sppl_verify_names_the_failing_check_of_a_broken_likelihood(require_gl, capsys):
+def test_sppl_verify_names_the_failing_check_of_a_broken_likelihood(require_gl, capsys,
+                                                                    registered):
     """A model file whose image sensor names a likelihood plugin that simulates with the
     wrong noise: the language cannot see it, the Geweke test does."""
-    register_likelihood("doubled_noise", DoubledNoise)
+    registered("doubled_noise", DoubledNoise)
     code = cli.main(["verify", str(FIXTURES / "broken_likelihood.scn"), "--steps", "2000",
                      "--geweke-chains", "60", "--geweke-length", "12", "--seed", "0",
                      "--alpha", str(EACH)])
