@@ -117,7 +117,7 @@ class Sampler:
         self.scorer = scorer
         self.rng = rng
         self.stats = MoveStats()
-        self.jump = moves.jump_probabilities(model)
+        self.jump = moves.jump_probabilities(model, bool(getattr(scorer, "terms", None)))
         self.birth = BirthProposal(model, scorer if getattr(scorer, "terms", None) else None)
         self.warmup = Warmup.of(model.inference)
         # The power of the likelihood this chain targets: 1 but in a tempered ladder's hotter

@@ -49,15 +49,19 @@ class Proposal:
     tries: Any = None
 
 
-def jump_probabilities(model: Model) -> dict[str, float]:
+def jump_probabilities(model: Model, observed: bool = True) -> dict[str, float]:
     """Probability of each model-jump type, given that a jump is made.
 
     It does not depend on the state: a death or change chosen in an empty scene does nothing,
-    as in the thesis's Algorithm 7. A change needs a second class to change to.
+    as in the thesis's Algorithm 7. A change needs a second class to change to. Without
+    observations (``observed`` false: the prior's scorer) nothing is ever unexplained, so
+    fitted births and deaths could never act, and the other jumps take their share.
     """
     w = dict(model.inference.jump_weights)
     if len(model.classes) < 2:
         w["change"] = 0.0
+    if not observed and any(w.get(j, 0.0) for j in JUMPS if not j.startswith("fitted_")):
+        w["fitted_birth"] = w["fitted_death"] = 0.0
     total = sum(w.get(j, 0.0) for j in JUMPS)
     return {j: w.get(j, 0.0) / total for j in JUMPS}
 

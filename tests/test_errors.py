@@ -13,6 +13,7 @@ import contextlib
 import io
 import json
 import os
+import re
 import subprocess
 import sys
 from collections.abc import Callable
@@ -61,9 +62,9 @@ def observations(d: Path, frame=(), top=(), rgb=None, depth=None, depth_name="de
 
 def _depth_sensor(body: str) -> str:
     """The shipped model with another depth sensor."""
-    old = "sensor depth {\n    likelihood gaussian\n    sigma : positive ~ gamma(2, 0.1)\n}"
-    assert old in MODEL
-    return MODEL.replace(old, "sensor depth {\n    " + body + "\n}")
+    old = re.search(r"sensor depth \{.*?\n\}", MODEL, re.DOTALL)
+    assert old is not None
+    return MODEL.replace(old.group(0), "sensor depth {\n    " + body + "\n}")
 
 
 def model_file(d: Path, text: str = MODEL) -> None:
