@@ -1,18 +1,20 @@
-"""Fit blocks.scn's appearance to Cycles: how bright rubber and metal are drawn, and how much of
-the light ignores orientation, chosen to bring sppl's renders of the test bed's true scenes
-closest to Cycles' renders of them; then count the objects whose true material and colour a
-wrong pair outscores.
+"""Fit blocks.scn's appearance to Cycles: how bright rubber and metal are drawn, how much of
+the light ignores orientation and how much grey sheen every surface shows, chosen to bring
+sppl's renders of the test bed's true scenes closest to Cycles' renders of them; then count
+the objects whose true material and colour a wrong pair outscores.
 
-    python benchmarks/testbed/calibrate.py            # the grid below, about two minutes
+    python benchmarks/testbed/calibrate.py            # the grid below, about four minutes
     python benchmarks/testbed/calibrate.py --check 0.8 1.2 0.35 --no-shadows   # one setting
+    python benchmarks/testbed/calibrate.py --check 1 0.7 0.6 --sheen 0.05
 
 blocks.scn draws an object of palette colour c as ``shade(c, f)`` with ``f`` its material's
-factor, lit as ``c f (ambient + intensity (1 - ambient) lambert)``. For each ambient share the
-light's intensity is set so that the lit floor keeps its brightness (the floor is what pins the
-exposure: Cycles' and sppl's floors agree, docs/testbed.md), so the fit is over three numbers:
-the rubber factor, the metal factor and the ambient share. The score is the mean squared RGB
-error over every pixel of the RGB camera, summed over the blocks.scn scenes with objects
-(the low-sun scene is rendered with its own sun, as a latent light would find it).
+factor, lit as ``c f (ambient + intensity (1 - ambient) lambert) + sheen``. For each ambient
+share and sheen the light's intensity is set so that the lit floor keeps its brightness (the
+floor is what pins the exposure: Cycles' and sppl's floors agree, docs/testbed.md), so the fit
+is over four numbers: the rubber factor, the metal factor, the ambient share and the sheen.
+The score is the mean squared RGB error over every pixel of the RGB camera, summed over the
+blocks.scn scenes with objects (the low-sun scene is rendered with its own sun, as a latent
+light would find it).
 
 The check renders each true scene again with one object's (material, colour) replaced by each of
 the 15 others and counts the objects for which some wrong pair scores higher under a Gaussian of
@@ -41,7 +43,8 @@ from sppl.simulate import objects_from_dict
 
 MODEL = ROOT / "models" / "blocks.scn"
 LAMBERT_FLOOR = 0.894  # the floor's lambert term under blocks.scn's light (0.4, -0.3, 1)
-MATERIAL = "select(material, rubber: 1, metal: 0.7)"  # as shipped; replaced by each candidate
+FLOOR = 0.6  # blocks.scn's floor grey
+MATERIAL = "select(material, rubber: 1, metal: 0.6)"  # as shipped; replaced by each candidate
 
 
 def model_with(rubber: float, metal: float):
@@ -52,14 +55,15 @@ def model_with(rubber: float, metal: float):
     return compile_model(text, MODEL)
 
 
-def lighting(model, ambient: float, shadows: bool, scene: dict):
-    """The model's lighting at this ambient share, the intensity keeping the lit floor's
-    brightness of the shipped (ambient 0.35, intensity 1) setting, the sun the scene's."""
+def lighting(model, ambient: float, shadows: bool, scene: dict, sheen: float = 0.0):
+    """The model's lighting at this ambient share and sheen, the intensity keeping the lit
+    floor's brightness of the old (ambient 0.35, intensity 1, no sheen) setting, the sun the
+    scene's."""
     floor = 0.35 + 0.65 * LAMBERT_FLOOR
-    intensity = (floor - ambient) / ((1 - ambient) * LAMBERT_FLOOR)
+    intensity = (floor - sheen / FLOOR - ambient) / ((1 - ambient) * LAMBERT_FLOOR)
     light = scene.get("renderer", {}).get("light", model.render.light)
-    return replace(model.render, ambient=ambient, intensity=intensity, shadows=shadows,
-                   light=tuple(light), latent=())
+    return replace(model.render, ambient=ambient, intensity=intensity, sheen=sheen,
+                   shadows=shadows, light=tuple(light), latent=())
 
 
 def scenes():
@@ -87,24 +91,28 @@ def render_error(renderer, model, settings, scene, frames, sigma=None):
     return total
 
 
+def mean_error(cases, renderer, model, ambient, sheen, shadows=True):
+    return sum(render_error(renderer, model, lighting(model, ambient, shadows, scene, sheen),
+                            scene, frames) for _, scene, frames in cases) / len(cases)
+
+
 def fit(cases, renderer, grid):
     rows = []
     for rubber, metal in itertools.product(grid["rubber"], grid["metal"]):
         model = model_with(rubber, metal)
-        for ambient in grid["ambient"]:
-            err = sum(render_error(renderer, model, lighting(model, ambient, True, scene), scene,
-                                   frames) for _, scene, frames in cases)
-            rows.append((err / len(cases), rubber, metal, ambient))
+        for ambient, sheen in itertools.product(grid["ambient"], grid["sheen"]):
+            rows.append((mean_error(cases, renderer, model, ambient, sheen),
+                         rubber, metal, ambient, sheen))
     return sorted(rows)
 
 
-def check(cases, renderer, rubber, metal, ambient, shadows, sigma):
+def check(cases, renderer, rubber, metal, ambient, shadows, sigma, sheen=0.0):
     model = model_with(rubber, metal)
     colours = ["gray", "red", "blue", "green", "brown", "purple", "cyan", "yellow"]  # clevr
     wrong = 0
     total = 0
     for name, scene, frames in cases:
-        settings = lighting(model, ambient, shadows, scene)
+        settings = lighting(model, ambient, shadows, scene, sheen)
         base = render_error(renderer, model, settings, scene, frames, sigma)
         for k, o in enumerate(scene["objects"]):
             best = None
@@ -129,26 +137,35 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--check", type=float, nargs=3, metavar=("RUBBER", "METAL", "AMBIENT"),
                    help="check one setting instead of fitting")
+    p.add_argument("--sheen", type=float, default=0.0, help="with --check: the sheen (default 0)")
     p.add_argument("--no-shadows", action="store_true", help="with --check: no cast shadows")
     p.add_argument("--sigma", type=float, default=0.03, help="the check's Gaussian scale")
     args = p.parse_args(argv)
+    if not 0.0 <= args.sheen <= 1.0:
+        p.error(f"--sheen is a grey level in [0, 1], got {args.sheen:g}")
     cases = scenes()
     renderer = Renderer(model_with(1, 1).render)
     if args.check:
         rubber, metal, ambient = args.check
-        check(cases, renderer, rubber, metal, ambient, not args.no_shadows, args.sigma)
+        check(cases, renderer, rubber, metal, ambient, not args.no_shadows, args.sigma,
+              args.sheen)
         return 0
-    grid = {"rubber": [0.8, 0.9, 1.0, 1.1, 1.2], "metal": [0.5, 0.6, 0.7, 0.8, 1.0, 1.2],
-            "ambient": [0.35, 0.5, 0.6, 0.7]}
+    # Around the setting fitted without a sheen (rubber 1, metal 0.7, ambient 0.6): the sheen
+    # takes over part of what the ambient share drew.
+    grid = {"rubber": [0.8, 0.9, 1.0, 1.1], "metal": [0.5, 0.6, 0.7, 0.8],
+            "ambient": [0.35, 0.45, 0.5, 0.55, 0.6, 0.7], "sheen": [0.0, 0.03, 0.05, 0.07, 0.09]}
     rows = fit(cases, renderer, grid)
-    print("mean squared RGB error per scene: rubber factor, metal factor, ambient share")
-    for err, rubber, metal, ambient in rows[:8]:
-        print(f"  {err:.5f}  rubber {rubber}  metal {metal}  ambient {ambient}")
-    shipped = next(r for r in rows if r[1:] == (0.8, 1.2, 0.35))
-    print(f"  {shipped[0]:.5f}  rubber 0.8  metal 1.2  ambient 0.35 (blocks.scn before)")
-    _, rubber, metal, ambient = rows[0]
-    print(f"\nthe best setting, rubber {rubber}, metal {metal}, ambient {ambient}:")
-    check(cases, renderer, rubber, metal, ambient, True, args.sigma)
+    print("mean squared RGB error per scene: rubber factor, metal factor, ambient share, sheen")
+    for err, rubber, metal, ambient, sheen in rows[:8]:
+        print(f"  {err:.5f}  rubber {rubber}  metal {metal}  ambient {ambient}  sheen {sheen}")
+    for (rubber, metal, ambient, sheen), label in [((0.8, 1.2, 0.35, 0.0), "the first blocks.scn"),
+                                                   ((1.0, 0.7, 0.6, 0.0), "fitted without a sheen")]:
+        err = mean_error(cases, renderer, model_with(rubber, metal), ambient, sheen)
+        print(f"  {err:.5f}  rubber {rubber}  metal {metal}  ambient {ambient}  sheen {sheen} "
+              f"({label})")
+    _, rubber, metal, ambient, sheen = rows[0]
+    print(f"\nthe best setting, rubber {rubber}, metal {metal}, ambient {ambient}, sheen {sheen}:")
+    check(cases, renderer, rubber, metal, ambient, True, args.sigma, sheen)
     return 0
 
 
