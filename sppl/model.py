@@ -250,7 +250,7 @@ class InferenceSettings:
 
 # The render block's parameters a model may leave uncertain, each a latent choice with a prior
 # (``ambient : unit ~ beta(4, 6)``), and the domain each must have.
-LIGHTING = ("ambient", "intensity", "azimuth", "elevation", "gain", "red", "blue")
+LIGHTING = ("ambient", "intensity", "sheen", "azimuth", "elevation", "gain", "red", "blue")
 RENDER_GROUP = "render"  # the name under which a trace keeps their values, beside the sensors'
 
 
@@ -259,16 +259,20 @@ class RenderSettings:
     """How a hypothesis is drawn. A part of colour c, lit at a surface whose normal makes the
     lambert term lambert with the light, shows
 
-        balance * gain * c * (ambient + intensity * (1 - ambient) * lambert * lit)
+        balance * gain * (c * (ambient + intensity * (1 - ambient) * lambert * lit) + sheen)
 
     where lit is 0 in the shadow of another part (``shadows``) and 1 elsewhere, and balance is
-    the white balance (red, 1, blue); the background shows balance * gain * background."""
+    the white balance (red, 1, blue); the background shows balance * gain * background.
+    ``sheen`` is a grey that every part shows whatever its colour and its orientation: a
+    rough surface mirrors a little of a grey sky, which a colour factor cannot draw (on a
+    dark or saturated colour, or a side turned from the sun, it is much of what is seen)."""
 
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
     ambient: float = 0.35
     # Direction *towards* the light, in world coordinates.
     light: tuple[float, float, float] = (0.4, -0.3, 1.0)
     intensity: float = 1.0
+    sheen: float = 0.0
     gain: float = 1.0
     red: float = 1.0
     blue: float = 1.0
@@ -305,7 +309,8 @@ class RenderSettings:
 
     def shaded(self) -> tuple:
         """What the shaders read of these settings, for telling two apart cheaply."""
-        return (self.direction, float(self.ambient), float(self.intensity), self.balance)
+        return (self.direction, float(self.ambient), float(self.intensity), float(self.sheen),
+                self.balance)
 
 
 @dataclass(frozen=True, eq=False)

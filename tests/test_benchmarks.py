@@ -78,10 +78,12 @@ def test_prior_scenes_benchmark_runs_and_draws_scenes_in_view(root, require_gl, 
 
 
 def test_blocks_appearance_reads_cycles_renders_better_than_the_old_one(root, require_gl):
-    """calibrate.py's check: with blocks.scn's shipped material factors and lighting, fewer of
-    the test bed's objects have their true (material, colour) outscored by a wrong pair in
-    Cycles' renders than with the factors it had before (rubber 0.8, metal 1.2, ambient 0.35,
-    no shadows), which inverted rubber and metal."""
+    """calibrate.py's check, under blocks.scn's own image likelihood: with its shipped material
+    factors and lighting, fewer of the test bed's objects have their true (material, colour)
+    outscored by a wrong pair in Cycles' renders than with the factors it had before (rubber
+    0.8, metal 1.2, ambient 0.35, no shadows), which inverted rubber and metal, and than with
+    the setting a squared error chose (ambient 0.45, sheen 0.07, metal 0.6), which read metal
+    as rubber on the test bed."""
     import re
 
     def wrong(*args):
@@ -90,5 +92,7 @@ def test_blocks_appearance_reads_cycles_renders_better_than_the_old_one(root, re
         assert total >= 20
         return n / total
 
-    assert wrong(1, 0.7, 0.6) < 0.25
+    shipped = wrong(1, 0.7, 0.6, "--sheen", 0.03)
+    assert shipped < 0.25
+    assert wrong(1, 0.6, 0.45, "--sheen", 0.07) > shipped + 0.1
     assert wrong(0.8, 1.2, 0.35, "--no-shadows") > 0.9

@@ -136,6 +136,114 @@ def test_azimuth_and_elevation_set_the_light_direction():
     assert keep.direction == pytest.approx((math.sqrt(0.5), 0.0, math.sqrt(0.5)))
 
 
+# --- the sheen --------------------------------------------------------------------------------
+
+
+def test_the_sheen_adds_its_grey_to_every_part_and_not_to_the_background(render):
+    """On the lit floor, the shadowed floor and the cube's top alike, a sheen adds the same
+    grey, times the gain and white balance; the background keeps its colour."""
+    cube = Part("box", np.eye(4), (0.9, 0.1, 0.1))
+    small = Part("box", translation(0.0, 0.0, -0.1) @ scaling(5.0, 5.0, 0.1), FLOOR)
+    balanced = replace(SHADOWS, gain=0.9, red=1.1, blue=0.8)
+    plain, _ = render([small, cube], top_down(), balanced)
+    rgb, _ = render([small, cube], top_down(), replace(balanced, sheen=0.07))
+    grey = 0.07 * np.array([0.9 * 1.1, 0.9, 0.9 * 0.8])
+    for row, column in [(32, 12), (32, 22), (32, 32)]:  # lit floor, its shadow, the cube
+        assert np.allclose(rgb[row, column] - plain[row, column], grey, atol=1e-4)
+    assert np.allclose(rgb[1, 1], plain[1, 1], atol=1e-6)  # (-3.1, 3.1): past the floor
+    lam = 1.0 / math.sqrt(2.0)
+    floor = np.array(FLOOR) * (0.35 + 0.65 * lam) + 0.07
+    assert np.allclose(rgb[32, 12], floor * np.array([0.9 * 1.1, 0.9, 0.9 * 0.8]), atol=1e-4)
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_gl_matches_the_ray_caster_with_a_sheen(require_gl, seed):
+    """Random scenes with shadows, a white balance and a sheen: the GL renderer (the sheen
+    read from the Lighting block) and the ray caster (its own sum) shade alike, and the sheen
+    changes what both draw."""
+    from test_render import random_camera, random_scene
+
+    rng = np.random.default_rng(10 + seed)
+    parts = [GROUND, *random_scene(rng)]
+    camera = random_camera(rng, 48, 40, "z")
+    settings = replace(SHADOWS, ambient=0.5, sheen=0.06, gain=1.1, red=0.9, blue=1.2)
+    renderer = Renderer(SHADOWS)
+    rgb, _ = renderer.render(parts, camera, settings)
+    without, _ = renderer.render(parts, camera, replace(settings, sheen=0.0))
+    renderer.release()
+    ref, depth = raycast(parts, camera, settings)
+    assert np.mean(np.abs(rgb - ref).max(axis=-1) > 0.02) <= 0.01
+    drawn = depth < camera.depth_max
+    assert drawn.sum() > 100
+    assert np.allclose((rgb - without)[drawn].mean(axis=0), 0.06 * np.array([0.99, 1.1, 1.32]),
+                       atol=1e-3)
+
+
+SHEEN_STEP = "    step render.gain = 0.03\n"
+
+
+@pytest.fixture(scope="module")
+def sheen_setting(require_gl, tmp_path_factory):
+    """The latent-lighting fixture with a latent sheen as well."""
+    text = MODEL.read_text()
+    assert SHEEN_STEP in text
+    text = text.replace("    shadows = true\n",
+                        "    shadows = true\n    sheen : interval(0, 0.2) ~ uniform(0, 0.2)\n")
+    text = text.replace(SHEEN_STEP, SHEEN_STEP + "    step render.sheen = 0.02\n")
+    model = compile_model(text, MODEL)
+    renderer = Renderer(model.render)
+    rng = np.random.default_rng(5)
+    truth = sample_objects(model, rng)
+    while len(truth) < 2:
+        truth = sample_objects(model, rng)
+    noise = sample_noise(model, rng)
+    frames = render_observations(model, truth, noise, SPECS, renderer, rng)
+    return model, renderer, Observations(MODEL.parent, frames), truth, noise
+
+
+def test_a_latent_sheen_compiles_and_is_drawn_from_its_prior(sheen_setting):
+    model, _, _, _, noise = sheen_setting
+    assert "sheen" in [p.name for p in model.render.latent]
+    assert 0.0 <= noise[RENDER_GROUP]["sheen"] <= 0.2
+
+
+def test_fast_and_reference_scores_agree_with_a_latent_sheen(sheen_setting):
+    model, renderer, obs, truth, noise = sheen_setting
+    fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
+    assert fast.pixels is not None
+    rng = np.random.default_rng(2)
+    for _ in range(4):
+        objects, drawn = sample_objects(model, rng), sample_noise(model, rng)
+        _agree(fast.evaluate(objects, noise=drawn)[0], ref.evaluate(objects, noise=drawn)[0])
+    # A move of the sheen alone re-lights every pixel: the scorer must not piece the
+    # proposal together from its parent's pixels.
+    trace = Sampler(model, fast, np.random.default_rng(3)).make_trace(truth, noise)
+    moved = {k: dict(v) for k, v in noise.items()}
+    moved[RENDER_GROUP]["sheen"] = 0.2 - noise[RENDER_GROUP]["sheen"] / 2
+    _agree(fast.evaluate(truth, trace, moved)[0], ref.evaluate(truth, noise=moved)[0])
+
+
+def test_simulate_draws_the_sheen(require_gl):
+    """``sppl simulate``'s rendering (render_observations) draws a fixed sheen: the same
+    scene is brighter by it on every part's pixel."""
+    plain = compile_model(RENDER_MODEL.format(body="ambient = 0.5"), "m.scn")
+    sheen = compile_model(RENDER_MODEL.format(body="ambient = 0.5\n sheen = 0.08"), "m.scn")
+    assert sheen.render.sheen == 0.08 and not sheen.render.latent
+    spec = CameraSpec(_camera("c", 32, 32, (2.0, -2.0, 1.5)), ("rgb",))
+    images = []
+    for model in (plain, sheen):
+        objects = (make_object(model, model.classes[0], {"x": 0.0}),)
+        renderer = Renderer(model.render)
+        noise = {"image": {"sigma": 0.0}}
+        images.append(render_observations(model, objects, noise, [spec], renderer,
+                                          np.random.default_rng(0))[0].rgb)
+        renderer.release()
+    difference = images[1] - images[0]
+    on_cube = np.abs(difference).max(axis=-1) > 1e-6
+    assert on_cube.sum() > 20
+    assert np.allclose(difference[on_cube], 0.08, atol=1e-5)
+
+
 # --- the fast scorer with latent lighting and shadows -----------------------------------------
 
 SPECS = [
@@ -348,6 +456,10 @@ def test_render_settings_and_lighting_parameters_compile():
     ("shadows = yes", "`shadows` is `true` or `false`"),
     ("gain = 1.1\n gain : positive ~ gamma(50, 0.02)", "`gain` is already a latent lighting"),
     ("intensity = -1", "`intensity` lies in [0, inf), got -1"),
+    ("sheen = 1.5", "`sheen` lies in [0, 1], got 1.5"),
+    ("sheen = -0.05", "`sheen` lies in [0, 1], got -0.05"),
+    ("sheen : positive ~ gamma(2, 0.02)", "`sheen` lies in [0, 1]: its domain must too"),
+    ("shen = 0.05", "unknown render setting `shen` (did you mean `sheen`?)"),
 ])
 def test_bad_render_blocks_are_one_line_errors(body, message):
     assert message in _errors(body)

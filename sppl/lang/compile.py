@@ -82,9 +82,12 @@ def compile_model(text: str, path: str | Path = DEFAULT_PATH) -> Model:
 
 _CONSTRAINTS = ("no_overlap", "max_objects")
 _SENSOR_KINDS = ("image", "depth")
-_RENDER_KEYS = ("background", "ambient", "light", "intensity", "gain", "red", "blue", "shadows")
-# Lighting parameters whose values must be at least 0 (ambient also at most 1).
-_NONNEGATIVE = ("ambient", "intensity", "gain", "red", "blue")
+_RENDER_KEYS = ("background", "ambient", "light", "intensity", "sheen", "gain", "red", "blue",
+                "shadows")
+# Lighting parameters whose values must be at least 0, and those of them also at most 1 (a
+# share of the light, a grey level).
+_NONNEGATIVE = ("ambient", "intensity", "sheen", "gain", "red", "blue")
+_UNIT = ("ambient", "sheen")
 _INFERENCE_KEYS = ("p_jump", "data_birth", "data_birth_spread", "adapt", "anneal", "anneal_from",
                    "tries", "tempered", "tempered_from")
 _JUMPS = tuple(InferenceSettings().jump_weights)
@@ -973,9 +976,9 @@ class _Compiler(ImportsMixin, ShapesMixin):
         if isinstance(domain, Finite):
             self.error(f"the lighting parameter `{name}` is a number, not a categorical choice",
                        item.domain.span)
-        elif name == "ambient" and (domain.contains(-1e-12) or domain.contains(1.0 + 1e-12)):
-            self.error("`ambient` lies in [0, 1]: its domain must too", item.domain.span,
-                       "write `ambient : interval(0, 1) ~ ...`")
+        elif name in _UNIT and (domain.contains(-1e-12) or domain.contains(1.0 + 1e-12)):
+            self.error(f"`{name}` lies in [0, 1]: its domain must too", item.domain.span,
+                       f"write `{name} : interval(0, 1) ~ ...`")
         elif name in _NONNEGATIVE and domain.contains(-1e-12):
             self.error(f"`{name}` is not negative: its domain must not hold negative values",
                        item.domain.span, f"write `{name} : positive ~ ...`")
@@ -990,8 +993,8 @@ class _Compiler(ImportsMixin, ShapesMixin):
             return None
         if key in _NONNEGATIVE:
             number = self.expr.constant(value, scope)
-            if number is not None and not (0.0 <= number <= (1.0 if key == "ambient" else math.inf)):
-                limits = "[0, 1]" if key == "ambient" else "[0, inf)"
+            if number is not None and not (0.0 <= number <= (1.0 if key in _UNIT else math.inf)):
+                limits = "[0, 1]" if key in _UNIT else "[0, inf)"
                 self.error(f"`{key}` lies in {limits}, got {number:g}", value.span)
                 return None
             return number

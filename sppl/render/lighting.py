@@ -2,7 +2,7 @@
 cast shadows need of the parts.
 
 ``shaders/lighting.glsl`` reads the light's direction, the ambient level, the intensity, the
-per-channel gain and, when shadows are on, every part that can cast one (its solid's
+per-channel gain, the sheen and, when shadows are on, every part that can cast one (its solid's
 unit-from-world map and kind). Both renderers and the fast scorer write the block once per
 hypothesis, so a model whose lighting is latent re-lights without recompiling anything.
 
@@ -58,7 +58,7 @@ def block(settings: RenderSettings, casters: bytes = b"") -> bytes:
     header = struct.pack(
         "12f", *settings.direction, 0.0,
         float(settings.ambient), float(settings.intensity), float(count),
-        1.0 if settings.shadows else 0.0, *settings.balance, 0.0,
+        1.0 if settings.shadows else 0.0, *settings.balance, float(settings.sheen),
     )
     return header + casters
 

@@ -75,8 +75,9 @@ def raycast(
         points = origin + nearest[hit][:, None] * directions[hit]
         facing = lambert > 0.0
         lambert[facing] *= ~_shadowed(parts, points[facing], light)
-    rgb[hit] = balance * colour[hit] * (
+    rgb[hit] = balance * (colour[hit] * (
         settings.ambient + settings.intensity * (1.0 - settings.ambient) * lambert)[:, None]
+        + settings.sheen)
     depth = np.full(h * w, float(camera.depth_max))
     along = nearest if camera.depth_type == "ray" else nearest * (directions @ forward)
     depth[hit] = np.minimum(along[hit], camera.depth_max)

@@ -19,7 +19,7 @@
 layout(std140) uniform Lighting {
     vec4 light_direction;  // xyz: the unit vector towards the light, world space
     vec4 shading;          // ambient, intensity, the number of casters, shadows on (1) or off (0)
-    vec4 balance;          // per channel: the gain times the white balance
+    vec4 balance;          // rgb per channel: the gain times the white balance; w: the sheen
     // Per caster, four rows: its unit-from-world affine map (rows of [linear | offset]), and
     // (kind, 0, 0, 0).
     vec4 casters[4 * MAX_CASTERS];
@@ -113,10 +113,11 @@ float lit(vec3 camera_point) {
     return 1.0;
 }
 
-// A part's colour as lit at a point with this normal (not yet normalised).
+// A part's colour as lit at a point with this normal (not yet normalised). The sheen is grey
+// added whatever the colour and the light: the sky a rough surface mirrors.
 vec3 shade(vec3 colour, vec3 normal, vec3 camera_point) {
     float lambert = max(dot(normalize(normal), light_direction.xyz), 0.0);
     if (lambert > 0.0 && shading.w > 0.5) lambert *= lit(camera_point);
     float ambient = shading.x;
-    return balance.rgb * colour * (ambient + shading.y * (1.0 - ambient) * lambert);
+    return balance.rgb * (colour * (ambient + shading.y * (1.0 - ambient) * lambert) + balance.w);
 }
