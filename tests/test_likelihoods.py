@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 from scipy import stats
+from toys import gaussian_shapes
 
 from sppl.errors import SpplError
-from sppl.lang import load_model
 from sppl.likelihoods import Gaussian, available_likelihoods, get_likelihood
 from sppl.observations import load_observations
 from sppl.render import Renderer
@@ -59,15 +59,11 @@ def test_registry_finds_by_name_and_reports_unknown_names(registered):
     assert isinstance(get_likelihood("test-laplace"), Laplace)
 
 
-def test_scorer_equals_reference_scoring_on_the_example(root, require_gl, tmp_path):
+def test_scorer_equals_reference_scoring_on_the_example(root, require_gl):
     """The fast path (GL render, cached statistics) against numpy/scipy scoring of the same
     renders, on the shipped example's true scene, with Gaussian likelihoods on both sensors
     (the shipped model's depth mixture has its own twin tests, tests/test_robust.py)."""
-    text = (root / "models" / "shapes.scn").read_text()
-    gaussian = tmp_path / "shapes_gaussian.scn"
-    gaussian.write_text(text.replace("likelihood mixture(outlier = 0.01)", "likelihood gaussian"))
-    model = load_model(gaussian)
-    assert model.sensors["depth"].likelihood == "gaussian"
+    model = gaussian_shapes(root)
     obs = load_observations(root / "examples" / "three_shapes" / "obs")
     truth = json.loads((root / "examples" / "three_shapes" / "scene.json").read_text())
     objects = objects_from_dict(model, truth)

@@ -68,3 +68,25 @@ def toy_model(classes, *, no_overlap=False, p_jump=1.0, noise=False) -> Model:
 
 def prior_sampler(model: Model, seed: int) -> Sampler:
     return Sampler(model, PriorScorer(), np.random.default_rng(seed))
+
+
+_GAUSSIAN_MODELS: dict = {}
+
+
+def gaussian_shapes(root):
+    """models/shapes.scn with a Gaussian depth sensor, loaded from a copy also named
+    shapes.scn: for the tests that hold the Gaussian fast path against its reference on the
+    shipped model (its depth mixture has twin tests of its own, tests/test_robust.py)."""
+    import tempfile
+    from pathlib import Path
+
+    from sppl.lang import load_model
+
+    if "shapes" not in _GAUSSIAN_MODELS:
+        text = (Path(root) / "models" / "shapes.scn").read_text()
+        copy = Path(tempfile.mkdtemp(prefix="sppl-gaussian-")) / "shapes.scn"
+        copy.write_text(text.replace("likelihood mixture(outlier=0.01)", "likelihood gaussian"))
+        _GAUSSIAN_MODELS["shapes"] = load_model(copy)
+    model = _GAUSSIAN_MODELS["shapes"]
+    assert model.sensors["depth"].likelihood == "gaussian"
+    return model
