@@ -190,13 +190,20 @@ def sheen_setting(require_gl, tmp_path_factory):
     text = text.replace("    shadows = true\n",
                         "    shadows = true\n    sheen : interval(0, 0.2) ~ uniform(0, 0.2)\n")
     text = text.replace(SHEEN_STEP, SHEEN_STEP + "    step render.sheen = 0.02\n")
-    model = compile_model(text, MODEL)
+    return _observed_setting(compile_model(text, MODEL), seed=5)
+
+
+def _observed_setting(model, seed, lighting=None):
+    """A prior scene of two or more objects and its observations by SPECS: (model, renderer,
+    observations, truth, noise), the render group's noise updated by ``lighting``."""
     renderer = Renderer(model.render)
-    rng = np.random.default_rng(5)
+    rng = np.random.default_rng(seed)
     truth = sample_objects(model, rng)
     while len(truth) < 2:
         truth = sample_objects(model, rng)
     noise = sample_noise(model, rng)
+    if lighting:
+        noise[RENDER_GROUP].update(lighting)
     frames = render_observations(model, truth, noise, SPECS, renderer, rng)
     return model, renderer, Observations(MODEL.parent, frames), truth, noise
 
@@ -209,17 +216,13 @@ def test_a_latent_sheen_compiles_and_is_drawn_from_its_prior(sheen_setting):
 
 def test_fast_and_reference_scores_agree_with_a_latent_sheen(sheen_setting):
     model, renderer, obs, truth, noise = sheen_setting
-    fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
-    assert fast.pixels is not None
-    rng = np.random.default_rng(2)
-    for _ in range(4):
-        objects, drawn = sample_objects(model, rng), sample_noise(model, rng)
-        _agree(fast.evaluate(objects, noise=drawn)[0], ref.evaluate(objects, noise=drawn)[0])
+    fast = _agree_on_prior_draws(model, renderer, obs, seed=2, draws=4)
     # A move of the sheen alone re-lights every pixel: the scorer must not piece the
     # proposal together from its parent's pixels.
     trace = Sampler(model, fast, np.random.default_rng(3)).make_trace(truth, noise)
     moved = {k: dict(v) for k, v in noise.items()}
     moved[RENDER_GROUP]["sheen"] = 0.2 - noise[RENDER_GROUP]["sheen"] / 2
+    ref = ReferenceScorer(model, obs, renderer)
     _agree(fast.evaluate(truth, trace, moved)[0], ref.evaluate(truth, noise=moved)[0])
 
 
@@ -254,17 +257,9 @@ SPECS = [
 
 @pytest.fixture(scope="module")
 def setting(require_gl):
-    model = load_model(MODEL)
-    renderer = Renderer(model.render)
-    rng = np.random.default_rng(0)
-    truth = sample_objects(model, rng)
-    while len(truth) < 2:
-        truth = sample_objects(model, rng)
-    noise = sample_noise(model, rng)
     # A light low in the sky, whose shadows reach well beyond the objects.
-    noise[RENDER_GROUP].update(elevation=0.6, azimuth=2.5)
-    frames = render_observations(model, truth, noise, SPECS, renderer, rng)
-    return model, renderer, Observations(MODEL.parent, frames), truth, noise
+    return _observed_setting(load_model(MODEL), seed=0,
+                             lighting={"elevation": 0.6, "azimuth": 2.5})
 
 
 def _agree(fast, ref):
@@ -272,14 +267,21 @@ def _agree(fast, ref):
         assert fast[key][1] == pytest.approx(ref[key][1], rel=1e-4, abs=1e-6)
 
 
-def test_fast_and_reference_scores_agree_under_random_lighting(setting):
-    model, renderer, obs, _, _ = setting
+def _agree_on_prior_draws(model, renderer, obs, seed, draws):
+    """The fast path's scores against the reference's on prior draws of scenes and lighting;
+    the fast scorer."""
     fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
     assert fast.pixels is not None
-    rng = np.random.default_rng(1)
-    for _ in range(6):
+    rng = np.random.default_rng(seed)
+    for _ in range(draws):
         objects, noise = sample_objects(model, rng), sample_noise(model, rng)
         _agree(fast.evaluate(objects, noise=noise)[0], ref.evaluate(objects, noise=noise)[0])
+    return fast
+
+
+def test_fast_and_reference_scores_agree_under_random_lighting(setting):
+    model, renderer, obs, _, _ = setting
+    _agree_on_prior_draws(model, renderer, obs, seed=1, draws=6)
 
 
 def _full_terms(scorer, trace):
