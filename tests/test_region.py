@@ -195,6 +195,17 @@ def test_every_move_and_its_reverse_with_a_region(require_gl, region):
     assert {"birth", "death", "change", "replace", "parameters", "noise"} <= moved
 
 
+def test_fitted_births_and_deaths_and_their_reverses_with_a_region(require_gl):
+    """Fitted births and deaths with a region (24x24 cameras, so that objects leave blobs to
+    seed): every one undone by its reverse with minus its log ratio."""
+    model = model_with("region box(-1, -2, 3, 1)",
+                       jumps=LIGHT + ", fitted_birth = 3, fitted_death = 3")
+    report = verify.move_checks(model, states=16, seed=5, size=24)
+    assert report.passed, report.table()
+    moved = {r.quantity.split(":")[0] for r in report.rows}
+    assert {"fitted_birth", "fitted_death"} <= moved, report.table()
+
+
 def test_a_chain_with_a_region_never_leaves_it(require_gl):
     """Every state of a short chain on rendered observations (every jump weighed) keeps
     every object inside the region, a change that carries only one coordinate included."""
