@@ -120,18 +120,16 @@ class MergeSplit:
     other_places: tuple[int, ...]
 
     def reverse(self, sampler, before: Trace, proposal: Proposal, after: Trace) -> Proposal:
+        # The place of the single object (merged or split), in the tuple without the others.
+        single = self.fitted_place - sum(p < self.fitted_place for p in self.other_places)
         if proposal.move == "merge":
-            # The place of the single object, in the tuple without the others.
-            single = self.fitted_place - sum(p < self.fitted_place for p in self.other_places)
             return propose_split(sampler, after, sampler.rng, k=single, state=self.state,
                                  fitted=before.objects[self.fitted_place],
                                  born=tuple(before.objects[p] for p in self.other_places),
                                  born_places=self.other_places)
         return propose_merge(sampler, after, sampler.rng, i=self.other_places[0],
                              j=self.fitted_place, more=self.other_places[1:],
-                             state=self.state, target=before.objects[
-                                 self.fitted_place - sum(p < self.fitted_place
-                                                         for p in self.other_places)])
+                             state=self.state, target=before.objects[single])
 
 
 def log_q_born(sampler, obj: SceneObject, state: Trace) -> float:

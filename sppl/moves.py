@@ -27,6 +27,9 @@ from .trace import SceneObject, Trace, make_object
 
 JUMPS = ("birth", "death", "change", "replace", "refit", "merge", "split", "fitted_birth",
          "fitted_death")
+# The jumps that start from what the observations leave unexplained, and so never act without
+# observations.
+FROM_OBSERVATIONS = ("fitted_birth", "fitted_death")
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,8 +63,8 @@ def jump_probabilities(model: Model, observed: bool = True) -> dict[str, float]:
     w = dict(model.inference.jump_weights)
     if len(model.classes) < 2:
         w["change"] = 0.0
-    if not observed and any(w.get(j, 0.0) for j in JUMPS if not j.startswith("fitted_")):
-        w["fitted_birth"] = w["fitted_death"] = 0.0
+    if not observed and any(w.get(j, 0.0) for j in JUMPS if j not in FROM_OBSERVATIONS):
+        w.update(dict.fromkeys(FROM_OBSERVATIONS, 0.0))
     total = sum(w.get(j, 0.0) for j in JUMPS)
     return {j: w.get(j, 0.0) / total for j in JUMPS}
 
