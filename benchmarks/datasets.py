@@ -31,10 +31,10 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from sppl.cli import main as sppl  # noqa: E402
-from sppl.dataset import find_scenes, run_dataset  # noqa: E402
-from sppl.executors import LocalExecutor, RayExecutor, default_workers  # noqa: E402
 from sppl.lang import load_model  # noqa: E402
-from sppl.posterior import write_posterior  # noqa: E402
+from sppl.output.posterior import write_posterior  # noqa: E402
+from sppl.runs.dataset import find_scenes, run_dataset  # noqa: E402
+from sppl.runs.executors import LocalExecutor, RayExecutor, default_workers  # noqa: E402
 
 MODEL = ROOT / "models" / "shapes.scn"
 

@@ -17,7 +17,7 @@ circle, every camera recording RGB and depth (Gaussian likelihood over every pix
 - incremental: a single-object parameter move scored from the current state
   (Scorer.evaluate with the parent trace), against full rescoring by each path.
 Then, at the same setting, the fast path with each sensor likelihood (``likelihoods``): the
-Gaussian, the inlier/outlier mixture and Student-t on both sensors (sppl/robust.py), a whole
+Gaussian, the inlier/outlier mixture and Student-t on both sensors (sppl/model/robust.py), a whole
 scene and a single-object move each, interleaved, and each robust one's time against the
 Gaussian's; and a noise move, which for the robust ones re-runs the terms pass over the whole
 scene (for the Gaussian it costs nothing: its statistics are sufficient).
@@ -50,17 +50,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import panda3d_path  # noqa: E402
 
-from sppl.camera import Camera, focal_from_fov, look_at  # noqa: E402
-from sppl.chain import Sampler  # noqa: E402
-from sppl.distributions import Beta, Gamma  # noqa: E402
-from sppl.domains import Interval, Positive  # noqa: E402
+from sppl.data.camera import Camera, focal_from_fov, look_at  # noqa: E402
+from sppl.data.observations import CameraSpec, Observations  # noqa: E402
+from sppl.infer.chain import Sampler  # noqa: E402
 from sppl.lang import load_model  # noqa: E402
-from sppl.model import Parameter, Sensor  # noqa: E402
-from sppl.observations import CameraSpec, Observations  # noqa: E402
+from sppl.model.distributions import Beta, Gamma  # noqa: E402
+from sppl.model.domains import Interval, Positive  # noqa: E402
+from sppl.model.simulate import render_observations  # noqa: E402
+from sppl.model.trace import make_object  # noqa: E402
+from sppl.model.types import Parameter, Sensor  # noqa: E402
 from sppl.render import Renderer, kernels, renderer_string  # noqa: E402
-from sppl.scoring import ReferenceScorer, Scorer  # noqa: E402
-from sppl.simulate import render_observations  # noqa: E402
-from sppl.trace import make_object  # noqa: E402
+from sppl.scoring.scorer import ReferenceScorer, Scorer  # noqa: E402
 
 NOISE = {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}}
 # The robust likelihoods compared with the Gaussian: (model file's likelihood, options, the

@@ -4,7 +4,7 @@
     python benchmarks/lockstep.py --sweeps 50 --repeats 3
 
 Sweeps per second of --chains chains of models/shapes.scn on the three shapes, two ways in one
-process, from the same states: in lockstep (``sppl.lockstep.sweep_together``: each round's
+process, from the same states: in lockstep (``sppl.runs.lockstep.sweep_together``: each round's
 evaluations of every chain in one ``Scorer.evaluate_batch`` call) and one chain after another
 (each chain's own ``Sampler.sweep``). The chains are first run --warm sweeps, so that they
 hold objects; each repeat then restarts every chain from that state and generator, so both
@@ -32,13 +32,14 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from sppl.chain import Sampler  # noqa: E402
+from sppl.data.observations import load_observations  # noqa: E402
+from sppl.infer.chain import Sampler  # noqa: E402
 from sppl.lang import load_model  # noqa: E402
-from sppl.lockstep import sweep_together  # noqa: E402
-from sppl.observations import load_observations  # noqa: E402
 from sppl.render import Renderer, renderer_string  # noqa: E402
-from sppl.run import run_chain, run_chains  # noqa: E402
-from sppl.scoring import Scorer  # noqa: E402
+from sppl.runs.chains import run_chains
+from sppl.runs.lockstep import sweep_together  # noqa: E402
+from sppl.runs.run import run_chain  # noqa: E402
+from sppl.scoring.scorer import Scorer  # noqa: E402
 
 
 def main(argv=None) -> int:

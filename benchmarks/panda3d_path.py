@@ -22,9 +22,23 @@ try:
     loadPrcFileData("", "load-display p3headlessgl\nwindow-type offscreen\n"
                         "audio-library-name null\nsync-video false\nnotify-level fatal")
     from panda3d.core import (
-        AmbientLight, DirectionalLight, FrameBufferProperties, Geom, GeomNode, GeomTriangles,
-        GeomVertexData, GeomVertexFormat, GraphicsEngine, GraphicsOutput, GraphicsPipe,
-        GraphicsPipeSelection, LMatrix4f, MatrixLens, NodePath, Texture, WindowProperties,
+        AmbientLight,
+        DirectionalLight,
+        FrameBufferProperties,
+        Geom,
+        GeomNode,
+        GeomTriangles,
+        GeomVertexData,
+        GeomVertexFormat,
+        GraphicsEngine,
+        GraphicsOutput,
+        GraphicsPipe,
+        GraphicsPipeSelection,
+        LMatrix4f,
+        MatrixLens,
+        NodePath,
+        Texture,
+        WindowProperties,
     )
     from panda3d.core import Camera as PandaCamera
 except ImportError as error:  # pragma: no cover - depends on the machine

@@ -10,10 +10,10 @@ the truth's.
     python benchmarks/prior_scenes.py --json run.json        # every row, with its MAP
 
 Scene i of a model has 2 + (i mod 5) objects and is drawn by ``scenes_in_view.draw_in_view``
-from the seed (--seed, model); it is rendered by ``sppl.experiment.simulate`` with the noise of
+from the seed (--seed, model); it is rendered by ``sppl.runs.experiment.simulate`` with the noise of
 the example's ``scene.json``. A scene is solved when a MAP check (every --check-every sweeps)
 has the true count, classes and categorical values, and every position within --tolerance
-(``sppl.compare``); seconds are the chain's CPU seconds (``time.process_time``: a machine
+(``sppl.output.compare``); seconds are the chain's CPU seconds (``time.process_time``: a machine
 shared with other work does not inflate them), and a chain stops at its solution or at
 --limit. "MAP - truth" is the log joint of the last MAP checked minus that of the true scene
 with the true noise, scored as the sampler scores: below 0, the chain never reached a state
@@ -41,13 +41,13 @@ sys.path.insert(0, str(HERE))
 from scenes_in_view import draw_in_view
 from time_to_solution import solve
 
-from sppl.chain import Sampler
-from sppl.experiment import simulate
+from sppl.data.observations import load_cameras, load_observations
+from sppl.infer.chain import Sampler
 from sppl.lang import load_model
-from sppl.observations import load_cameras, load_observations
+from sppl.model.simulate import load_scene
 from sppl.render import Renderer
-from sppl.scoring import Scorer
-from sppl.simulate import load_scene
+from sppl.runs.experiment import simulate
+from sppl.scoring.scorer import Scorer
 
 MODELS = ("shapes", "blocks", "tabletop", "shapes_plus")
 SEED = 2026

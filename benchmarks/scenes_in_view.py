@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from sppl.trace import counts_allowed, make_object, scene_is_valid
+from sppl.model.trace import counts_allowed, make_object, scene_is_valid
 
 MARGIN = 6  # pixels: an object's centre at least this far inside every image
 

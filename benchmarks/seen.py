@@ -5,7 +5,7 @@
 
 A chain of models/shapes.scn on examples/three_shapes/obs, started at the true scene, is timed
 sweep by sweep; after each sweep its objects are marked the way a run marks every sample it
-writes (``sppl.seen.SeenCache``: an id render per camera, reused while the objects are the
+writes (``sppl.render.seen.SeenCache``: an id render per camera, reused while the objects are the
 same ones), and, separately, by the id pass with no reuse. Printed: the median sweep, the
 median mark with and without reuse, the share of samples that needed a render, and the run's
 overhead (total marking time over total sweep time), all from this one run.
@@ -28,13 +28,13 @@ def main(argv=None) -> None:
     parser.add_argument("--sweeps", type=int, default=300)
     args = parser.parse_args(argv)
 
-    from sppl.chain import Sampler
+    from sppl.data.observations import load_observations
+    from sppl.infer.chain import Sampler
     from sppl.lang import load_model
-    from sppl.observations import load_observations
+    from sppl.model.simulate import load_scene
     from sppl.render import Renderer
-    from sppl.scoring import Scorer
-    from sppl.seen import SeenCache, SeenPass
-    from sppl.simulate import load_scene
+    from sppl.render.seen import SeenCache, SeenPass
+    from sppl.scoring.scorer import Scorer
 
     model = load_model(ROOT / "models" / "shapes.scn")
     obs = load_observations(ROOT / "examples" / "three_shapes" / "obs")

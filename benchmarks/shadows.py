@@ -27,16 +27,16 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from sppl.camera import Camera, focal_from_fov, look_at
-from sppl.chain import Sampler
-from sppl.distributions import Gamma
-from sppl.domains import Positive
+from sppl.data.camera import Camera, focal_from_fov, look_at
+from sppl.data.observations import CameraSpec, Observations
+from sppl.infer.chain import Sampler
 from sppl.lang import load_model
-from sppl.model import RENDER_GROUP, Parameter
-from sppl.observations import CameraSpec, Observations
+from sppl.model.distributions import Gamma
+from sppl.model.domains import Positive
+from sppl.model.simulate import render_observations, sample_objects
+from sppl.model.types import RENDER_GROUP, Parameter
 from sppl.render import Renderer, renderer_string
-from sppl.scoring import Scorer
-from sppl.simulate import render_observations, sample_objects
+from sppl.scoring.scorer import Scorer
 
 NOISE = {"image": {"sigma": 0.05, "outlier": 0.01}, "depth": {"sigma": 0.05, "outlier": 0.01}}  # blocks.scn: mixtures
 
@@ -82,7 +82,7 @@ def rate(fn, seconds: float) -> float:
 
 
 def timings(model, scorer, trace, rng, seconds):
-    from sppl.trace import make_object
+    from sppl.model.trace import make_object
 
     def whole():
         scorer.evaluate(trace.objects, None, trace.noise)

@@ -10,7 +10,7 @@ Per scene and renderer it prints whether the scene was recovered, when the MAP w
 right, and the inferred noise scales against the sensors' true ones (0.02 in RGB, 0.02 m in
 depth; ``scene.json``'s ``noise``). Recovered: the MAP scene the run reports at its end has
 the true number of objects, and its objects, matched to the true ones by ground position
-(an optimal assignment, ``sppl.compare``), have the true classes and categorical values
+(an optimal assignment, ``sppl.output.compare``), have the true classes and categorical values
 (colours, sizes and materials) and every position within --tolerance (0.15 m). shapes.scn's
 sizes are continuous, and only the positions, classes and colours of its objects are checked.
 "First right" is the first MAP check (every --check-every sweeps) that was right, with the
@@ -37,8 +37,8 @@ sys.path.insert(0, str(HERE))
 
 from time_to_solution import solve
 
+from sppl.data.observations import load_observations
 from sppl.lang import load_model
-from sppl.observations import load_observations
 
 TESTBED = HERE / "testbed"
 RENDERERS = ("cycles", "sppl")

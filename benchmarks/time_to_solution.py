@@ -30,11 +30,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from sppl.compare import compare_scenes  # noqa: E402
-from sppl.experiment import simulate  # noqa: E402
+from sppl.data.observations import load_observations  # noqa: E402
 from sppl.lang import load_model  # noqa: E402
-from sppl.observations import load_observations  # noqa: E402
-from sppl.run import run_chain  # noqa: E402
+from sppl.output.compare import compare_scenes  # noqa: E402
+from sppl.runs.experiment import simulate  # noqa: E402
+from sppl.runs.run import run_chain  # noqa: E402
 
 SHAPES = ROOT / "models" / "shapes.scn"
 # Per example: the model it samples with, and its observations (None: simulated).

@@ -29,10 +29,10 @@ def child(tree: Path) -> None:
     import evaluations as e
     import numpy as np
 
-    from sppl.chain import Sampler
+    from sppl.infer.chain import Sampler
     from sppl.lang import load_model
     from sppl.render import Renderer
-    from sppl.scoring import Scorer
+    from sppl.scoring.scorer import Scorer
 
     model = load_model(tree / "models" / "shapes.scn")
     renderer = Renderer(model.render)

@@ -10,51 +10,101 @@ The public API, for scripts and notebooks; the command line (``sppl``) is built 
 Everything heavier (the renderer's GL context, matplotlib for reports) is made only when used.
 """
 
-__version__ = "0.1.0"
-
-from .chain import Sampler
-from .compare import compare_scenes
-from .dataset import find_scenes, run_dataset
+from ._version import __version__  # noqa: F401  (sppl.__version__)
+from .data.observations import Observations, load_cameras, load_observations, write_observations
 from .errors import ModelError, ObservationError, RenderError, RunError, SpplError
+from .infer.chain import Sampler
 from .lang import compile_model, load_model, parse
-from .executors import LocalExecutor, RayExecutor
-from .likelihoods import Gaussian, Likelihood, available_likelihoods, register_likelihood
-from .model import Model
-from .observations import Observations, load_cameras, load_observations, write_observations
-from .posterior import load_run, open_posterior, write_posterior
-from .proposal_checks import check_proposals, joint_check
-from .region import RegionError, bind_region
+from .model import (
+                    Beta,
+                    Categorical,
+                    DiscreteUniform,
+                    Exponential,
+                    Finite,
+                    Gamma,
+                    InferenceSettings,
+                    Integer,
+                    Interval,
+                    LogNormal,
+                    Normal,
+                    ObjectClass,
+                    Parameter,
+                    Part,
+                    Periodic,
+                    Poisson,
+                    Positive,
+                    Real,
+                    RenderSettings,
+                    Sensor,
+                    TruncatedNormal,
+                    Uniform,
+                    rotation,
+                    rotation_z,
+                    scaling,
+                    translation,
+)
+from .model.likelihoods import Gaussian, Likelihood, available_likelihoods, register_likelihood
+from .model.region import RegionError, bind_region
+from .model.robust import Mixture, StudentT
+from .model.simulate import render_observations, sample_noise, sample_objects
+from .model.types import Model
+from .output.compare import compare_scenes
+from .output.posterior import load_run, open_posterior, write_posterior
 from .render import Renderer, raycast
-from .robust import Mixture, StudentT
-from .run import run_chain, run_chains
-from .scoring import ReferenceScorer, Scorer
-from .seen import SeenPass, seen_reference
-from .simulate import render_observations, sample_noise, sample_objects
-from .verify import verify_model
+from .render.seen import SeenPass, seen_reference
+from .runs.chains import run_chains
+from .runs.dataset import find_scenes, run_dataset
+from .runs.executors import LocalExecutor, RayExecutor
+from .runs.run import run_chain
+from .scoring.scorer import PriorScorer, ReferenceScorer, Scorer
+from .verify import check_proposals, joint_check, verify_model
 
 __all__ = [
+    "Beta",
+    "Categorical",
+    "DiscreteUniform",
+    "Exponential",
+    "Finite",
+    "Gamma",
     "Gaussian",
+    "InferenceSettings",
+    "Integer",
+    "Interval",
     "Likelihood",
     "LocalExecutor",
+    "LogNormal",
     "Mixture",
     "Model",
     "ModelError",
+    "Normal",
+    "ObjectClass",
     "ObservationError",
     "Observations",
+    "Parameter",
+    "Part",
+    "Periodic",
+    "Poisson",
+    "Positive",
+    "PriorScorer",
     "RayExecutor",
+    "Real",
     "ReferenceScorer",
     "RegionError",
     "RenderError",
+    "RenderSettings",
     "Renderer",
     "RunError",
     "Sampler",
     "Scorer",
     "SeenPass",
+    "Sensor",
     "SpplError",
     "StudentT",
+    "TruncatedNormal",
+    "Uniform",
     "available_likelihoods",
-    "check_proposals",
     "bind_region",
+    "check_proposals",
     "compare_scenes",
     "compile_model",
     "find_scenes",
@@ -68,12 +118,16 @@ __all__ = [
     "raycast",
     "register_likelihood",
     "render_observations",
+    "rotation",
+    "rotation_z",
     "run_chain",
     "run_chains",
     "run_dataset",
     "sample_noise",
     "sample_objects",
+    "scaling",
     "seen_reference",
+    "translation",
     "verify_model",
     "write_observations",
     "write_posterior",

@@ -16,11 +16,11 @@ import shutil
 import sys
 from pathlib import Path
 
-from . import __version__
+from ._version import __version__
 from .errors import SpplError, UsageError
 
 DEFAULT_STEPS = 20000
-CHECKPOINT_SECONDS = 30.0  # sppl.run.CHECKPOINT_SECONDS, without importing the engine for --help
+CHECKPOINT_SECONDS = 30.0  # sppl.runs.run.CHECKPOINT_SECONDS, without importing the engine for --help
 VERIFY_STEPS = 20000
 
 EPILOG = """\
@@ -229,7 +229,7 @@ def _prepare_out(out: Path, force: bool, *, kind: str = "run",
     refused without ``force``; with it, it is deleted only if it looks like a ``kind``
     output folder of sppl's (``OUT_KINDS``) and holds neither the current folder nor any of
     the ``inputs`` (what the command reads, by the option that names it)."""
-    from .lock import LOCK_FILE, FolderInUse, held, holder
+    from .runs.lock import LOCK_FILE, FolderInUse, held, holder
 
     if out.is_symlink() or (out.exists() and (
             not out.is_dir() or any(e.name != LOCK_FILE for e in out.iterdir()))):
@@ -280,7 +280,7 @@ def _prepare_out(out: Path, force: bool, *, kind: str = "run",
 
 def _empty(folder: Path) -> None:
     """Delete everything in ``folder`` but its lock file, which its writer holds."""
-    from .lock import LOCK_FILE
+    from .runs.lock import LOCK_FILE
 
     for entry in folder.iterdir():
         if entry.name == LOCK_FILE:
@@ -304,10 +304,10 @@ class _Claim:
 
 @contextlib.contextmanager
 def _claim_out(out: Path):
-    """Hold ``out``'s lock (``sppl.lock``) for the block, making the folder if it is missing;
+    """Hold ``out``'s lock (``sppl.runs.lock``) for the block, making the folder if it is missing;
     a second writer meets a one-line error naming this process. A path that is a file or a
     link is left to ``_prepare_out`` to refuse."""
-    from .lock import FolderInUse, hold, held, holder
+    from .runs.lock import FolderInUse, held, hold, holder
 
     for folder in out.resolve().parents:  # a run's chain_<i>/ is its run's to write
         pid = None if held(folder) else holder(folder)
@@ -362,7 +362,7 @@ def _check_seed(seed: int | None) -> None:
 
 def cmd_check(args) -> int:
     from .lang import load_model
-    from .region import region_text
+    from .model.region import region_text
 
     model = load_model(args.model)
     print(f"{args.model}: {len(model.classes)} classes, sensors: {', '.join(model.sensors) or 'none'}")
@@ -421,10 +421,16 @@ def cmd_fmt(args) -> int:
 def cmd_simulate(args) -> int:
     import numpy as np
 
+    from .data.observations import load_cameras, write_observations
     from .lang import load_model
-    from .observations import load_cameras, write_observations
+    from .model.simulate import (
+        load_scene,
+        render_observations,
+        sample_noise,
+        sample_objects,
+        scene_dict,
+    )
     from .render import Renderer
-    from .simulate import load_scene, render_observations, sample_noise, sample_objects, scene_dict
 
     _check_seed(args.seed)
     model = load_model(args.model)
@@ -459,7 +465,7 @@ def cmd_simulate(args) -> int:
 def cmd_sample(args) -> int:
     if args.resume is not None:
         if not args.resume.is_dir():
-            from .run import read_run
+            from .runs.run import read_run
 
             read_run(args.resume)  # its error says what --resume takes
         with _claim_out(args.resume):  # no other process may write it while it is read
@@ -474,12 +480,13 @@ def _still_drawing(tries: int, seconds: float) -> None:
 
 
 def _sample(args) -> int:
-    from .dataset import is_dataset
+    from .data.observations import load_observations
     from .lang import load_model
-    from .observations import load_observations
-    from .posterior import write_posterior
-    from .run import effective_burn, run_chains
-    from .samples import MIN_SAMPLES, format_summary
+    from .output.posterior import write_posterior
+    from .output.samples import MIN_SAMPLES, format_summary
+    from .runs.chains import run_chains
+    from .runs.dataset import is_dataset
+    from .runs.run import effective_burn
 
     if args.resume is None:
         if args.model is None or args.obs is None:
@@ -551,8 +558,8 @@ def _sample(args) -> int:
 def _sample_dataset(args, model) -> int:
     """``sppl sample`` over a data set: every scene x chain a task, one run folder a scene in
     ``--out``; rerunning the same command continues what an earlier run left unfinished."""
-    from .dataset import DATASET_RECORD, format_dataset_summary, run_dataset
-    from .executors import make_executor
+    from .runs.dataset import DATASET_RECORD, format_dataset_summary, run_dataset
+    from .runs.executors import make_executor
 
     if args.lockstep:
         raise UsageError("--lockstep runs the chains of one scene in this process; a data set's "
@@ -588,7 +595,7 @@ def _sample_dataset(args, model) -> int:
 def _resume_settings(args) -> None:
     """Fill the options of ``sample --resume RUN`` from the run's record; refuse to change
     what would make the continued chain another chain."""
-    from .run import read_run
+    from .runs.run import read_run
 
     run = args.resume
     if (run / "dataset.json").is_file():
@@ -634,14 +641,14 @@ def _recorded(run: Path, recorded: str | None, what: str, option: str) -> Path:
 
 
 def cmd_export(args) -> int:
-    from .posterior import write_posterior
+    from .output.posterior import write_posterior
 
     print(f"wrote {write_posterior(args.run, args.out)}")
     return 0
 
 
 def cmd_report(args) -> int:
-    from .report import write_report
+    from .output.report import write_report
 
     if args.truth is not None and args.no_truth:
         raise UsageError("--truth and --no-truth contradict each other")

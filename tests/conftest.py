@@ -45,7 +45,7 @@ def require_gl():
 def registered():
     """``register_likelihood`` for one test: the registry is as it was once the test ends,
     so a likelihood a test makes up is never seen by another."""
-    from sppl import likelihoods
+    from sppl.model import likelihoods
 
     saved = dict(likelihoods._registry)
     yield likelihoods.register_likelihood

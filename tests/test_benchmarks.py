@@ -62,10 +62,10 @@ def test_prior_scenes_benchmark_runs_and_draws_scenes_in_view(root, require_gl, 
         from scenes_in_view import in_view
     finally:
         sys.path.remove(str(root / "benchmarks"))
+    from sppl.data.observations import load_cameras
     from sppl.lang import load_model
-    from sppl.observations import load_cameras
-    from sppl.simulate import objects_from_dict
-    from sppl.trace import scene_is_valid
+    from sppl.model.simulate import objects_from_dict
+    from sppl.model.trace import scene_is_valid
 
     model = load_model(root / "models" / "blocks.scn")
     cameras = load_cameras(root / "examples" / "models" / "blocks" / "cameras.json")

@@ -8,14 +8,14 @@ import math
 import numpy as np
 import pytest
 
-from sppl import moves
-from sppl.camera import Camera, focal_from_fov, look_at
-from sppl.chain import Sampler
+from sppl.data.camera import Camera, focal_from_fov, look_at
+from sppl.data.observations import CameraSpec, Observations
+from sppl.infer import moves
+from sppl.infer.chain import Sampler
 from sppl.lang import load_model
-from sppl.observations import CameraSpec, Observations
+from sppl.model.simulate import objects_from_dict, render_observations
 from sppl.render import Renderer
-from sppl.scoring import Scorer
-from sppl.simulate import objects_from_dict, render_observations
+from sppl.scoring.scorer import Scorer
 
 SCENE = {
     "objects": [

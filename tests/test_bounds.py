@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 import shapely
 
-from sppl.camera import Camera, look_at
-from sppl.geometry import PRIMITIVES, Part, footprints_overlap, rotation, scaling, translation
+from sppl.data.camera import Camera, look_at
 from sppl.lang import load_model
+from sppl.model.geometry import PRIMITIVES, Part, footprints_overlap, rotation, scaling, translation
+from sppl.model.simulate import sample_objects
+from sppl.model.trace import make_object, overlaps_any
 from sppl.render.bounds import INSIDE_MARGIN, CameraBounds, contains, unit_corners, world_corners
 from sppl.render.drawlist import DrawCache
-from sppl.simulate import sample_objects
-from sppl.trace import make_object, overlaps_any
 
 
 def _part(rng, spread=1.5) -> Part:

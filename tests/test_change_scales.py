@@ -7,8 +7,9 @@ from __future__ import annotations
 import pytest
 from false_alarms import EACH
 
-from sppl import moves, verify
+from sppl import verify
 from sppl.errors import ModelError
+from sppl.infer import moves
 from sppl.lang import compile_model
 
 SOURCE = """

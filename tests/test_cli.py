@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from sppl.cli import main
-from sppl.samples import read_samples
+from sppl.output.samples import read_samples
 
 CAMERAS = {
     "w": 40, "h": 40, "fl_x": 45.0, "fl_y": 45.0, "cx": 20.0, "cy": 20.0, "depth_max": 8.0,

@@ -23,12 +23,13 @@ import pytest
 from test_cli import CAMERAS
 
 from sppl.cli import main
-from sppl.dataset import TASK_RECORD, find_scenes, is_dataset, run_dataset
-from sppl.executors import LocalExecutor
+from sppl.data.observations import load_observations
 from sppl.lang import load_model
-from sppl.observations import load_observations
-from sppl.run import chain_extra, chain_seeds, run_chain
-from sppl.samples import read_samples
+from sppl.output.samples import read_samples
+from sppl.runs.dataset import find_scenes, is_dataset, run_dataset
+from sppl.runs.executors import LocalExecutor
+from sppl.runs.run import chain_extra, chain_seeds, run_chain
+from sppl.runs.tasks import TASK_RECORD
 
 SEED = 3
 STEPS = 10

@@ -35,7 +35,7 @@ FORCE = ["--steps", "5", "--force"]  # few steps: a --force that wrongly goes ah
 
 
 def _pose(eye=(3.0, -2.0, 1.5), target=(0.0, 0.0, 0.5)):
-    from sppl.camera import look_at
+    from sppl.data.camera import look_at
 
     return look_at(eye, target).tolist()
 

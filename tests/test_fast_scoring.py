@@ -18,16 +18,16 @@ import numpy as np
 import pytest
 from toys import gaussian_shapes
 
-from sppl.camera import Camera, focal_from_fov, look_at
-from sppl.chain import Sampler
+from sppl.data.camera import Camera, focal_from_fov, look_at
+from sppl.data.observations import CameraSpec, Observations
+from sppl.infer.chain import Sampler
 from sppl.lang import load_model
-from sppl.likelihoods import Gaussian, gpu_statistics
-from sppl.model import Sensor
-from sppl.observations import CameraSpec, Observations
+from sppl.model.likelihoods import Gaussian, gpu_statistics
+from sppl.model.simulate import render_observations, sample_noise, sample_objects
+from sppl.model.trace import make_object
+from sppl.model.types import Sensor
 from sppl.render import Renderer
-from sppl.scoring import ReferenceScorer, Renders, Scorer
-from sppl.simulate import render_observations, sample_noise, sample_objects
-from sppl.trace import make_object
+from sppl.scoring.scorer import ReferenceScorer, Renders, Scorer
 
 # How far a GL-side sum of squared residuals can be from the reference's, over one term's
 # pixels. A pixel's term is A - B, A = |o - c|^2 and B = |o - bg|^2 (observation o, rendered
@@ -278,7 +278,7 @@ def test_noise_moves_reuse_the_cached_statistics(setting):
     model, renderer, obs, truth, noise = setting
     sampler = Sampler(model, Scorer(model, obs, renderer), np.random.default_rng(6))
     trace = sampler.make_trace(truth, noise)
-    from sppl import moves
+    from sppl.infer import moves
 
     kind = next(iter(model.sensors))
     name = model.sensors[kind].noise[0].name

@@ -1,4 +1,4 @@
-"""Fitted births and their deaths (sppl/fitted_birth.py): a whole object fitted to a blob of
+"""Fitted births and their deaths (sppl/infer/fitted_birth.py): a whole object fitted to a blob of
 unexplained pixels. Where the seeds fall, that the fit finds a missing object, that each move
 and its reverse have opposite ratios, and, against the exact posterior, that the chain stays
 there with them and drifts when the fitted density is left out."""
@@ -16,11 +16,11 @@ from test_merge import noisy_world
 from test_proposal_checks import flat_world
 from test_verify import seen_world
 
-from sppl import fit as fitting
-from sppl import fitted_birth, moves, verify
-from sppl import proposal_checks as pc
-from sppl.chain import Sampler
-from sppl.trace import make_object
+from sppl import verify
+from sppl.infer import fit as fitting
+from sppl.infer import fitted_birth, moves
+from sppl.infer.chain import Sampler
+from sppl.model.trace import make_object
 
 
 def with_fitted(model, weight=3.0):
@@ -96,7 +96,7 @@ def fitted_tile():
 def tile_report():
     model = fitted_tile()
     truth = (make_object(model, model.classes[0], {"x": 0.3, "y": -0.2}),)
-    return pc.joint_check(model, truth, {"image": {"sigma": 0.6}}, chains=200, length=8,
+    return verify.joint_check(model, truth, {"image": {"sigma": 0.6}}, chains=200, length=8,
                           cells=31, size=8, p_empty=0.5, alpha=EACH, seed=0)
 
 

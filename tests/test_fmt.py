@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from sppl.cli import main
-from sppl.lang.pretty import expression, format_source
 from sppl.lang import parse
+from sppl.lang.pretty import expression, format_source
 
 ROOT = Path(__file__).resolve().parent.parent
 

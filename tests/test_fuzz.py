@@ -137,7 +137,7 @@ KEYS = ["fl_x", "fl_y", "cx", "cy", "w", "h", "depth_max", "near", "depth_type",
 
 
 def good_transforms() -> dict:
-    from sppl.camera import look_at
+    from sppl.data.camera import look_at
 
     return {"fl_x": 9.0, "w": W, "h": H, "frames": [{
         "file_path": "images/a.png", "depth_file_path": "depth/a.npy",
@@ -245,7 +245,7 @@ def depth_files(draw):
 
 
 def loads_or_spplerror(folder: Path) -> None:
-    from sppl.observations import load_cameras, load_observations
+    from sppl.data.observations import load_cameras, load_observations
 
     for load in (load_observations, load_cameras):
         try:
@@ -278,7 +278,7 @@ def scratch(tmp_path_factory) -> Path:
 
 
 def test_the_unmutated_folder_loads(scratch):
-    from sppl.observations import load_observations
+    from sppl.data.observations import load_observations
 
     assert len(load_observations(write_folder(scratch / "good", good_transforms()))) == 1
 
@@ -315,12 +315,12 @@ def test_observation_folders_long(scratch, transforms, image, depth):
 @pytest.fixture(scope="module")
 def world(tmp_path_factory, require_gl):
     """shapes.scn and a 16x16 RGB and depth observation of one cube."""
-    from sppl.chain import Sampler
     from sppl.cli import main
+    from sppl.data.observations import load_observations
+    from sppl.infer.chain import Sampler
     from sppl.lang import load_model
-    from sppl.observations import load_observations
     from sppl.render import Renderer
-    from sppl.scoring import Scorer
+    from sppl.scoring.scorer import Scorer
 
     d = tmp_path_factory.mktemp("extreme")
     cameras = {"w": 16, "h": 16, "fl_x": 18.0, "fl_y": 18.0, "cx": 8.0, "cy": 8.0,
@@ -341,7 +341,7 @@ def world(tmp_path_factory, require_gl):
 def grid_scene(model, classes: list[int], far: bool, sizes: list[float]):
     """Objects on a grid 3 m apart (so none overlap), around the cameras' target or 10 km
     away, of the given classes and sizes (m)."""
-    from sppl.trace import make_object
+    from sppl.model.trace import make_object
 
     objects = []
     for k, (c, size) in enumerate(zip(classes, sizes)):

@@ -10,7 +10,7 @@ import pytest
 from test_bounds import _cameras, _part
 
 from sppl.errors import RenderError
-from sppl.geometry import Part, scaling, translation
+from sppl.model.geometry import Part, scaling, translation
 from sppl.render import kernels
 from sppl.render.bounds import MARGIN, CameraBounds, unit_corners
 from sppl.render.drawlist import DrawCache

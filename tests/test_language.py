@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 import shapely
 
-from sppl.distributions import Categorical, Gamma, Normal, Uniform
-from sppl.domains import Finite, Interval, Periodic, Positive, Real
 from sppl.errors import ModelError, ModelErrors
 from sppl.lang import ast, compile_model, load_model, parse
-from sppl.likelihoods import Gaussian
-from sppl.model import InferenceSettings
+from sppl.model.distributions import Categorical, Gamma, Normal, Uniform
+from sppl.model.domains import Finite, Interval, Periodic, Positive, Real
+from sppl.model.likelihoods import Gaussian
+from sppl.model.types import InferenceSettings
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 

@@ -14,9 +14,13 @@ import numpy as np
 import pytest
 from false_alarms import EACH, two_proportions_p
 from scipy import stats
+from toys import prior_sampler
 
-from sppl import likelihoods, moves
-from sppl.distributions import (
+from sppl.errors import ModelError, ModelErrors
+from sppl.infer import moves
+from sppl.lang import compile_model, load_model
+from sppl.model import likelihoods
+from sppl.model.distributions import (
     Beta,
     Categorical,
     Dependent,
@@ -25,13 +29,10 @@ from sppl.distributions import (
     LogNormal,
     TruncatedNormal,
 )
-from sppl.domains import Integer, Periodic
-from sppl.errors import ModelError, ModelErrors
-from sppl.lang import compile_model, load_model
-from sppl.scoring import Scorer
-from sppl.simulate import sample_objects
-from sppl.trace import counts_allowed, make_object
-from toys import prior_sampler
+from sppl.model.domains import Integer, Periodic
+from sppl.model.simulate import sample_objects
+from sppl.model.trace import counts_allowed, make_object
+from sppl.scoring.scorer import Scorer
 
 ROOT = Path(__file__).resolve().parent.parent
 MUG = ROOT / "models" / "meshes" / "mug.obj"
@@ -386,7 +387,7 @@ def test_declared_footprint_and_floating_classes():
     c = make_object(m, table, {"x": 0.6, "y": 0.0})  # the tops overlap, the footprints not
     d = make_object(m, balloon, {"x": 0.0, "y": 0.0})  # floats: never in the constraint
     assert balloon.floating and d.footprint is None
-    from sppl.trace import scene_is_valid
+    from sppl.model.trace import scene_is_valid
 
     assert not scene_is_valid([a, b]) and scene_is_valid([a, c]) and scene_is_valid([a, d])
 
@@ -422,8 +423,8 @@ def test_static_scenery_and_the_ground_are_rendered_with_every_hypothesis():
             self.calls.append(list(parts))
             return np.zeros((2, 2, 3), "f4"), np.zeros((2, 2), "f4")
 
-    from sppl.camera import Camera
-    from sppl.observations import Frame, Observations
+    from sppl.data.camera import Camera
+    from sppl.data.observations import Frame, Observations
 
     camera = Camera("c", 2, 2, 1.0, 1.0, 1.0, 1.0, np.eye(4))
     obs = Observations(root=Path("."), frames=[Frame(camera=camera, rgb=np.zeros((2, 2, 3)))])
@@ -685,7 +686,7 @@ def test_a_third_party_likelihood_registered_by_entry_point(tmp_path, monkeypatc
     info = tmp_path / "laplace_plugin-1.0.dist-info"
     info.mkdir()
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: laplace-plugin\nVersion: 1.0\n")
-    (info / "entry_points.txt").write_text("[sppl.likelihoods]\nlaplace = laplace_plugin:Laplace\n")
+    (info / "entry_points.txt").write_text("[sppl.model.likelihoods]\nlaplace = laplace_plugin:Laplace\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.setattr(likelihoods, "_registry", dict(likelihoods._BUILTIN))
     monkeypatch.setattr(likelihoods, "_plugins_loaded", False)

@@ -16,19 +16,20 @@ import pytest
 from false_alarms import EACH, SLOW_EACH
 from test_fast_scoring import _dense
 
-from sppl import moves, verify
-from sppl.camera import Camera, focal_from_fov, look_at
-from sppl.chain import Sampler
+from sppl import verify
+from sppl.data.camera import Camera, focal_from_fov, look_at
+from sppl.data.observations import CameraSpec, Observations
 from sppl.errors import ModelErrors
-from sppl.geometry import Part, scaling, translation
+from sppl.infer import moves
+from sppl.infer.chain import Sampler
 from sppl.lang import compile_model, load_model
-from sppl.model import RENDER_GROUP, RenderSettings
-from sppl.observations import CameraSpec, Observations
+from sppl.model.geometry import Part, scaling, translation
+from sppl.model.simulate import render_observations, sample_noise, sample_objects
+from sppl.model.trace import make_object
+from sppl.model.types import RENDER_GROUP, RenderSettings
+from sppl.output.samples import read_samples
 from sppl.render import Renderer, raycast
-from sppl.samples import read_samples
-from sppl.scoring import ReferenceScorer, Scorer
-from sppl.simulate import render_observations, sample_noise, sample_objects
-from sppl.trace import make_object
+from sppl.scoring.scorer import ReferenceScorer, Scorer
 
 MODEL = Path(__file__).resolve().parent / "fixtures" / "lighting" / "latent_lighting.scn"
 FLOOR = (0.6, 0.6, 0.6)
@@ -394,8 +395,8 @@ def test_geweke_with_latent_lighting_and_shadows(require_gl, false_alarm):
 
 def test_lighting_is_in_the_samples_the_summary_the_posterior_and_a_resumed_run(
         setting, tmp_path):
-    from sppl.posterior import write_posterior
-    from sppl.run import run_chain
+    from sppl.output.posterior import write_posterior
+    from sppl.runs.run import run_chain
 
     model, _, obs, _, _ = setting
     reference = run_chain(model, obs, tmp_path / "whole", steps=8, seed=4, progress=False)
@@ -409,7 +410,7 @@ def test_lighting_is_in_the_samples_the_summary_the_posterior_and_a_resumed_run(
     run_chain(model, obs, half, steps=8, seed=4, progress=False, resume=True)
     assert read_samples(half / "samples.jsonl") == samples
     pytest.importorskip("xarray")
-    from sppl.posterior import open_posterior
+    from sppl.output.posterior import open_posterior
 
     tree = open_posterior(write_posterior(tmp_path / "whole", tmp_path / "posterior.nc"))
     assert f"{RENDER_GROUP}_gain" in tree["posterior"]
@@ -522,7 +523,7 @@ def _colour_setting():
     frames = []
     for spec in [CameraSpec(_camera("c", 48, 48, (2.6, -2.2, 2.2)), ("rgb",))]:
         rgb, _ = renderer.render(parts, spec.camera, seen)
-        from sppl.observations import Frame
+        from sppl.data.observations import Frame
 
         frames.append(Frame(camera=spec.camera, rgb=rgb))
     return fixed, latent, renderer, Observations(Path("."), frames)

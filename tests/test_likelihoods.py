@@ -10,12 +10,12 @@ import pytest
 from scipy import stats
 from toys import gaussian_shapes
 
+from sppl.data.observations import load_observations
 from sppl.errors import SpplError
-from sppl.likelihoods import Gaussian, available_likelihoods, get_likelihood
-from sppl.observations import load_observations
+from sppl.model.likelihoods import Gaussian, available_likelihoods, get_likelihood
+from sppl.model.simulate import objects_from_dict
 from sppl.render import Renderer
-from sppl.scoring import Scorer
-from sppl.simulate import objects_from_dict
+from sppl.scoring.scorer import Scorer
 
 
 def test_gaussian_matches_scipy_and_masks_missing_pixels():

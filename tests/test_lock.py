@@ -18,8 +18,8 @@ import pytest
 from test_resume import small_observations
 
 from sppl.cli import main
-from sppl.lock import LOCK_FILE, FolderInUse, FolderLock, hold, holder
-from sppl.samples import read_samples
+from sppl.output.samples import read_samples
+from sppl.runs.lock import LOCK_FILE, FolderInUse, FolderLock, hold, holder
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -71,7 +71,7 @@ def holder_process(tmp_path):
     def hold_it(folder: Path) -> subprocess.Popen:
         folder.mkdir(parents=True, exist_ok=True)
         p = subprocess.Popen(
-            [sys.executable, "-c", "import sys, time; from sppl.lock import FolderLock; "
+            [sys.executable, "-c", "import sys, time; from sppl.runs.lock import FolderLock; "
              "FolderLock(sys.argv[1]).acquire(); print('held', flush=True); time.sleep(600)",
              str(folder)], stdout=subprocess.PIPE, text=True)
         assert p.stdout.readline().strip() == "held"
@@ -153,9 +153,10 @@ def test_several_chains_hold_their_run_folder_for_the_run(setup, tmp_path, capsy
 
 
 def test_the_python_api_holds_the_run_folder_too(setup, tmp_path, holder_process):
+    from sppl.data.observations import load_observations
     from sppl.lang import load_model
-    from sppl.observations import load_observations
-    from sppl.run import run_chain, run_chains
+    from sppl.runs.chains import run_chains
+    from sppl.runs.run import run_chain
 
     model_path, obs_path = setup
     model, obs = load_model(model_path), load_observations(obs_path)

@@ -20,15 +20,16 @@ import numpy as np
 import pytest
 from test_resume import small_observations
 
-import sppl.lockstep
-from sppl.chain import Sampler
-from sppl.checkpoint import CHECKPOINT
+import sppl.runs.lockstep
 from sppl.cli import main
-from sppl.lockstep import sweep_together
+from sppl.infer.chain import Sampler
+from sppl.output.samples import read_samples
 from sppl.render import Renderer
-from sppl.run import chain_folder, run_chain, run_chains
-from sppl.samples import read_samples
-from sppl.scoring import ReferenceScorer
+from sppl.runs.chains import run_chains
+from sppl.runs.checkpoint import CHECKPOINT
+from sppl.runs.lockstep import sweep_together
+from sppl.runs.run import chain_folder, run_chain
+from sppl.scoring.scorer import ReferenceScorer
 
 STEPS = 12
 SEED = 4
@@ -106,7 +107,7 @@ def test_sigint_stops_every_chain_at_the_end_of_the_round_and_resumes_exactly(
     model, obs, _ = setup
     alone = one_by_one(model, obs, tmp_path)
     rounds = []
-    real = sppl.lockstep.sweep_together
+    real = sppl.runs.lockstep.sweep_together
 
     def interrupting(samplers, traces):
         rounds.append(None)
@@ -114,7 +115,7 @@ def test_sigint_stops_every_chain_at_the_end_of_the_round_and_resumes_exactly(
             os.kill(os.getpid(), signal.SIGINT)  # handled: every chain stops after this round
         return real(samplers, traces)
 
-    monkeypatch.setattr(sppl.lockstep, "sweep_together", interrupting)
+    monkeypatch.setattr(sppl.runs.lockstep, "sweep_together", interrupting)
     out = tmp_path / "lockstep"
     result = run_chains(model, obs, out, chains=CHAINS, steps=2 * STEPS, seed=SEED,
                         progress=False, lockstep=True)
@@ -125,7 +126,7 @@ def test_sigint_stops_every_chain_at_the_end_of_the_round_and_resumes_exactly(
             json.loads(line) for line in alone[i].decode().splitlines()[:5]]
         assert json.loads((folder / CHECKPOINT).read_text())["step"] == 5
         assert json.loads((folder / "summary.json").read_text())["steps_done"] == 5
-    monkeypatch.setattr(sppl.lockstep, "sweep_together", real)
+    monkeypatch.setattr(sppl.runs.lockstep, "sweep_together", real)
     run_chains(model, obs, out, chains=CHAINS, steps=2 * STEPS, seed=SEED, progress=False,
                lockstep=True, resume=True)
     assert lockstep_samples(out) == alone

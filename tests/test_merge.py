@@ -1,4 +1,4 @@
-"""The merge and split jumps (sppl/merge.py): two objects become one fitted object and back.
+"""The merge and split jumps (sppl/infer/merge.py): two objects become one fitted object and back.
 Exact through deterministic fits in the same scene without the objects: checked by prior
 recovery, Geweke and the move checks, and the checks fail when a density is left out."""
 
@@ -13,7 +13,8 @@ from false_alarms import EACH
 from test_verify import seen_world
 from toys import ball_class, block_class, toy_model
 
-from sppl import merge, verify
+from sppl import verify
+from sppl.infer import merge
 
 
 def with_merges(model, weight=3.0):
@@ -53,7 +54,7 @@ def test_prior_recovery_sees_a_newborn_taken_for_free(monkeypatch):
 def test_the_partner_is_chosen_by_distance():
     """A merge partner near the merged-away object is far likelier than one across the
     scene, and the weights are a distribution."""
-    from sppl.trace import make_object
+    from sppl.model.trace import make_object
 
     model = toy_model([placed(ball_class(rate=1.0))])
     cls = model.classes[0]
@@ -84,7 +85,7 @@ def test_every_merge_and_split_and_its_reverse(require_gl):
 def noisy_world():
     """seen_world with noise ten times larger: two objects merged into one, or one split in
     two, are then accepted now and then against observations too."""
-    from sppl.distributions import Gamma
+    from sppl.model.distributions import Gamma
 
     world = seen_world()
     sensors = {}
@@ -120,9 +121,9 @@ def test_three_objects_merge_into_one_and_split_back():
     """A merge that takes two objects away besides the fitted one, and the split that gives
     both back, through the same scene without them: exact reverses (same trace, log ratios
     negatives), for merges with the prior as their only target."""
-    from sppl.chain import Sampler
-    from sppl.scoring import PriorScorer
-    from sppl.trace import make_object
+    from sppl.infer.chain import Sampler
+    from sppl.model.trace import make_object
+    from sppl.scoring.scorer import PriorScorer
 
     model = prior_model()
     sampler = Sampler(model, PriorScorer(), np.random.default_rng(4))

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import shapely
 
-from sppl.camera import Camera, look_at
+from sppl.data.camera import Camera, look_at
 from sppl.errors import RenderError
-from sppl.geometry import MESH_PREFIX, Part, footprint_of, load_mesh, unit_mesh
+from sppl.model.geometry import MESH_PREFIX, Part, footprint_of, load_mesh, unit_mesh
 from sppl.render import Renderer, raycast
 
 MUG = Path(__file__).resolve().parent.parent / "models" / "meshes" / "mug.obj"

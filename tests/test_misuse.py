@@ -195,12 +195,12 @@ def test_the_largest_seed_samples_and_writes_its_posterior_file(place):
 def test_a_run_that_fails_before_its_first_sample_leaves_nothing(place, monkeypatch):
     """A failure after the folder was made (here the scorer's set-up) removes what was
     written; the folder it made goes too."""
-    import sppl.run
+    import sppl.runs.run
 
     def broken(*args, **kwargs):
-        raise sppl.run.RunError("the starting scene's log joint is NaN")
+        raise sppl.runs.run.RunError("the starting scene's log joint is NaN")
 
-    monkeypatch.setattr(sppl.run, "Scorer", broken)
+    monkeypatch.setattr(sppl.runs.run, "Scorer", broken)
     before = tree(place)
     code, err = run_main([*SAMPLE, "--out", "made/here", "--steps", "3"], place)
     assert code == 1 and "NaN" in err, err
@@ -230,7 +230,7 @@ def test_a_truncated_count_is_its_truncated_poisson_even_far_below_the_rate(fals
     chi-square test at the test's false-alarm rate (fixed seed)."""
     from scipy import stats
 
-    from sppl.model import ObjectClass
+    from sppl.model.types import ObjectClass
 
     cls = ObjectClass("c", 12.0, (), lambda v: (), max_count=4)
     rng = np.random.default_rng(0)

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from false_alarms import EACH, SLOW_EACH
 
-from sppl import moves
-from sppl.camera import Camera, look_at
+from sppl.data.camera import Camera, look_at
+from sppl.infer import moves
 from sppl.lang import load_model
 from sppl.lang.pretty import format_source
-from sppl.simulate import sample_objects
+from sppl.model.simulate import sample_objects
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 # Where a camera sees each model's objects from: (eye, target).

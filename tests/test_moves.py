@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from false_alarms import EACH, two_proportions_p
 from scipy import stats
-
-from sppl import moves
-from sppl.domains import Finite, Interval, Periodic, Positive
-from sppl.trace import make_object
 from toys import ball_class, block_class, prior_sampler, toy_model
+
+from sppl.infer import moves
+from sppl.model.domains import Finite, Interval, Periodic, Positive
+from sppl.model.trace import make_object
 
 
 @pytest.fixture

@@ -13,9 +13,9 @@ import pytest
 from scipy import stats as scipy_stats
 from toys import ball_class, toy_model
 
-from sppl import chain
-from sppl.chain import Sampler, accept
-from sppl.trace import make_object
+from sppl.infer import chain
+from sppl.infer.chain import Sampler, accept
+from sppl.model.trace import make_object
 
 
 class DegenerateScorer:
@@ -95,8 +95,8 @@ def test_accept_has_probability_exp_log_alpha():
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
 def test_a_proposal_density_that_breaks_down_is_rejected_or_decided_without_nan(bad, monkeypatch):
     """A proposal whose own ratio is NaN or infinite: decided in log space, NaN rejected."""
-    from sppl import moves
-    from sppl.scoring import PriorScorer
+    from sppl.infer import moves
+    from sppl.scoring.scorer import PriorScorer
 
     model = toy_model([ball_class()])
     sampler = Sampler(model, PriorScorer(), np.random.default_rng(3))

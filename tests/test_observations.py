@@ -7,15 +7,15 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from sppl.camera import CV_TO_GL, Camera, look_at
-from sppl.errors import ObservationError
-from sppl.observations import (
+from sppl.data.camera import CV_TO_GL, Camera, look_at
+from sppl.data.observations import (
     CameraSpec,
     Frame,
     load_cameras,
     load_observations,
     write_observations,
 )
+from sppl.errors import ObservationError
 
 W, H = 8, 6
 POSE = look_at([3.0, -2.0, 1.5], [0.0, 0.0, 0.5])
@@ -448,7 +448,7 @@ def test_depth_below_zero_is_missing_with_a_warning(tmp_path, caplog):
     value is said, since it may be a map with an offset rather than a sensor's mark."""
     import logging
 
-    from sppl.observations import load_observations
+    from sppl.data.observations import load_observations
 
     (tmp_path / "images").mkdir()
     (tmp_path / "depth").mkdir()
@@ -460,13 +460,13 @@ def test_depth_below_zero_is_missing_with_a_warning(tmp_path, caplog):
     (tmp_path / "transforms.json").write_text(json.dumps({"fl_x": 9.0, "w": 8, "h": 6, "frames": [
         {"file_path": "images/a.png", "depth_file_path": "depth/a.npy",
          "transform_matrix": look_at([3.0, -2.0, 1.5], [0.0, 0.0, 0.5]).tolist()}]}))
-    with caplog.at_level(logging.WARNING, logger="sppl.observations"):
+    with caplog.at_level(logging.WARNING, logger="sppl.data.observations"):
         frame = load_observations(tmp_path).frames[0]
     assert not frame.depth_valid[0].any() and not frame.depth_valid[1, :3].any()
     assert frame.depth_valid.sum() == 48 - 11 and np.isnan(frame.depth[0]).all()
     assert "11 depth pixels below zero (down to -1 m) taken as missing" in caplog.text
     caplog.clear()
     np.save(tmp_path / "depth" / "a.npy", np.full((6, 8), 2.0, np.float32))
-    with caplog.at_level(logging.WARNING, logger="sppl.observations"):
+    with caplog.at_level(logging.WARNING, logger="sppl.data.observations"):
         load_observations(tmp_path)
     assert "below zero" not in caplog.text

@@ -17,9 +17,9 @@ from test_resume import small_observations
 
 from sppl.cli import main
 from sppl.lang import load_model
-from sppl.posterior import open_posterior
-from sppl.run import run_chain
-from sppl.samples import MIN_SAMPLES, format_summary, summarise
+from sppl.output.posterior import open_posterior
+from sppl.output.samples import MIN_SAMPLES, format_summary, summarise
+from sppl.runs.run import run_chain
 
 WARMUP = 20
 

@@ -1,4 +1,4 @@
-"""The checks of the proposals that look at the observations (``sppl.proposal_checks``):
+"""The checks of the proposals that look at the observations (``sppl.verify.proposals``):
 they pass on the code, and fail on copies of it broken on purpose, each with the sampler left
 as it is and only the density the ratio uses made wrong:
 
@@ -33,17 +33,18 @@ import numpy as np
 import pytest
 from toys import COLOURS
 
-from sppl import fit as fitting
-from sppl import merge
-from sppl import proposal_checks as pc
-from sppl.birth import BirthProposal
-from sppl.chain import Sampler
-from sppl.distributions import Categorical, Gamma, Normal, Uniform
-from sppl.domains import Finite, Interval, Positive, Real
-from sppl.geometry import Part, scaling, translation
-from sppl.model import InferenceSettings, Model, ObjectClass, Parameter, Sensor
-from sppl.trace import make_object
+from sppl import verify
+from sppl.infer import fit as fitting
+from sppl.infer import merge
+from sppl.infer.birth import BirthProposal
+from sppl.infer.chain import Sampler
+from sppl.model.distributions import Categorical, Gamma, Normal, Uniform
+from sppl.model.domains import Finite, Interval, Positive, Real
+from sppl.model.geometry import Part, scaling, translation
+from sppl.model.trace import make_object
+from sppl.model.types import InferenceSettings, Model, ObjectClass, Parameter, Sensor
 from sppl.verify import Report
+from sppl.verify import proposals as pc
 
 # The false-alarm rate of each passing test (Holm over its rows): 1e-3.
 ALPHA = 1e-3
@@ -297,7 +298,7 @@ def one_tile() -> Model:
 def joint_report(**kw) -> Report:
     model = one_tile()
     truth = (make_object(model, model.classes[0], {"x": 0.3, "y": -0.2}),)
-    return pc.joint_check(model, truth, {"image": {"sigma": 0.6}}, chains=200, length=8,
+    return verify.joint_check(model, truth, {"image": {"sigma": 0.6}}, chains=200, length=8,
                           cells=31, size=8, p_empty=0.5, alpha=ALPHA, **kw)
 
 
@@ -352,7 +353,7 @@ def two_strips() -> Model:
 def strips_report(seed=0) -> Report:
     model = two_strips()
     truth = (make_object(model, model.classes[0], {"x": 0.3, "y": 0.0}),)
-    return pc.joint_check(model, truth, {"image": {"sigma": 2.0}}, chains=400, length=30,
+    return verify.joint_check(model, truth, {"image": {"sigma": 2.0}}, chains=400, length=30,
                           cells={"x": 31, "y": 1}, size=8, seed=seed, p_empty=0.3,
                           alpha=ALPHA)
 
@@ -361,10 +362,10 @@ def strips_report(seed=0) -> Report:
 def test_the_likelihood_of_a_strip_does_not_depend_on_its_y(require_gl):
     """What lets the joint check use one cell in y: exact, to the last bit of the sums."""
     from sppl.render import Renderer
-    from sppl.verify import _Simulator, verify_cameras
+    from sppl.verify import Simulator, verify_cameras
 
     model = two_strips()
-    sim = _Simulator(model, verify_cameras(model, 8), Renderer(model.render))
+    sim = Simulator(model, verify_cameras(model, 8), Renderer(model.render))
     cls = model.classes[0]
     for x in (-1.2, 0.3):
         renders = [sim.render((make_object(model, cls, {"x": x, "y": y}),))[0][0]

@@ -1,4 +1,4 @@
-"""The refit jump (sppl/fit.py): an object replaced by one of any class fitted to the scene
+"""The refit jump (sppl/infer/fit.py): an object replaced by one of any class fitted to the scene
 without it. Exact through a deterministic fit: checked by prior recovery, Geweke and the move
 checks, and the checks fail when the reverse density is left out."""
 
@@ -13,7 +13,8 @@ from false_alarms import EACH
 from test_verify import seen_world
 from toys import ball_class, block_class, gaussian_shapes, toy_model
 
-from sppl import fit, verify
+from sppl import verify
+from sppl.infer import fit
 
 
 def with_refit(model, weight=4.0):
@@ -70,11 +71,11 @@ def test_geweke_with_refits(false_alarm, require_gl):
 def test_the_fit_is_deterministic_and_improves_the_scene(require_gl):
     """Fitted twice from the same scene it gives the same values, and they score at least as
     well as where it started."""
-    from sppl.chain import Sampler
-    from sppl.simulate import sample_noise, sample_objects
+    from sppl.infer.chain import Sampler
+    from sppl.model.simulate import sample_noise, sample_objects
 
     model = seen_world()
-    sim = verify._Simulator(model, verify.verify_cameras(model, 8), _renderer(model))
+    sim = verify.Simulator(model, verify.verify_cameras(model, 8), _renderer(model))
     rng = np.random.default_rng(2)
     objects = ()
     while len(objects) < 2:
@@ -131,9 +132,9 @@ def test_the_bound_of_a_reverse_density_is_never_below_it(root):
 def _shapes_chain(root, sampler_class, sweeps=240):
     """Sweeps of a chain on the three shapes, which jumps every sweep (refits, merges and
     splits among the jumps): each sweep's state and the sampler."""
-    from sppl.observations import load_observations
+    from sppl.data.observations import load_observations
     from sppl.render import Renderer
-    from sppl.scoring import Scorer
+    from sppl.scoring.scorer import Scorer
 
     model = gaussian_shapes(root)
     # The jumps whose reverse fits are deferred, without fitted births and deaths (whose
@@ -155,7 +156,7 @@ def test_a_reverse_fit_left_undone_changes_no_decision(require_gl, root, monkeyp
     """A chain that computes a refit's, merge's or split's reverse fit only where its bound
     cannot decide draws exactly the states of one that always computes it; most are left
     undone; and a bound set too low (a ratio that can exceed it) changes the chain."""
-    from sppl.chain import Sampler, accept
+    from sppl.infer.chain import Sampler, accept
 
     class Eager(Sampler):
         def _accept_deferred(self, trace, proposal, new):

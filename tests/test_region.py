@@ -13,17 +13,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from false_alarms import EACH, SLOW_EACH
 import shapely
+from false_alarms import EACH, SLOW_EACH
 from scipy import stats
 
 from sppl import cli, verify
-from sppl.camera import Camera, focal_from_fov, look_at
-from sppl.chain import Sampler
-from sppl.distributions import Normal, Uniform
+from sppl.data.camera import Camera, focal_from_fov, look_at
 from sppl.errors import ModelErrors
+from sppl.infer.chain import Sampler
 from sppl.lang.compile import compile_model
-from sppl.region import (
+from sppl.model.distributions import Normal, Uniform
+from sppl.model.region import (
     RegionError,
     bind_region,
     box,
@@ -32,8 +32,9 @@ from sppl.region import (
     polygon,
     restrict,
 )
-from sppl.scoring import PriorScorer
-from sppl.trace import make_object
+from sppl.model.simulate import sample_noise, sample_objects
+from sppl.model.trace import make_object
+from sppl.scoring.scorer import PriorScorer
 
 FIXTURE = Path(__file__).resolve().parent / "fixtures" / "region" / "regions.scn"
 POLYGON = "region polygon((-1, -3), (3, -1), (2, 3), (-2, 2), (0, 0.5))"
@@ -83,7 +84,7 @@ def test_polygon_normaliser_agrees_with_boxes_it_is_made_of():
 
 def test_sections_of_a_polygon_with_a_hole():
     ring = shapely.Polygon([(0, 0), (4, 0), (4, 4), (0, 4)], [[(1, 1), (3, 1), (3, 3), (1, 3)]])
-    from sppl.region import Region
+    from sppl.model.region import Region
 
     region = Region("polygon", ring)
     assert region.sections(0, [2.0])[0] == [(0.0, 1.0), (3.0, 4.0)]
@@ -210,10 +211,10 @@ def test_a_chain_with_a_region_never_leaves_it(require_gl):
     """Every state of a short chain on rendered observations (every jump weighed) keeps
     every object inside the region, a change that carries only one coordinate included."""
     model = model_with(POLYGON, "change ball.x <-> block.y\n")
-    sim = verify._Simulator(model, verify.verify_cameras(model, 16), _renderer())
+    sim = verify.Simulator(model, verify.verify_cameras(model, 16), _renderer())
     rng = np.random.default_rng(2)
-    objs = verify.sample_objects(model, rng)
-    sampler = sim.sampler(sim.observe(sim.render(objs), verify.sample_noise(model, rng), rng),
+    objs = sample_objects(model, rng)
+    sampler = sim.sampler(sim.observe(sim.render(objs), sample_noise(model, rng), rng),
                           rng, Sampler)
     prior = Sampler(model, PriorScorer(), rng)  # where every jump is often accepted
     for s in (sampler, prior):

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from sppl.cli import main
-from sppl.samples import read_samples
+from sppl.output.samples import read_samples
 
 CAMERAS = {
     "w": 32, "h": 32, "fl_x": 36.0, "fl_y": 36.0, "cx": 16.0, "cy": 16.0, "depth_max": 8.0,
@@ -107,7 +107,7 @@ def test_the_same_seed_gives_the_same_chains(two_chains, model, obs, tmp_path):
 
 
 def test_the_posterior_file_pads_objects_into_slots(two_chains, tmp_path, capsys):
-    from sppl.posterior import open_posterior
+    from sppl.output.posterior import open_posterior
 
     out = tmp_path / "exported.nc"
     assert main(["export", str(two_chains), "--out", str(out)]) == 0
@@ -164,7 +164,7 @@ def test_the_posterior_file_opens_in_arviz_summary_with_no_arguments(two_chains)
 
 
 def test_one_chain_keeps_its_layout_and_gets_a_posterior_file(model, obs, tmp_path):
-    from sppl.posterior import diagnostics, load_run, posterior_arrays
+    from sppl.output.posterior import diagnostics, load_run, posterior_arrays
 
     out = tmp_path / "one"
     assert main(["sample", str(model), "--obs", str(obs), "--steps", "60", "--out", str(out),
@@ -173,7 +173,7 @@ def test_one_chain_keeps_its_layout_and_gets_a_posterior_file(model, obs, tmp_pa
     assert (out / "posterior.nc").exists()
     d = diagnostics(posterior_arrays(load_run(out)))
     assert d["n_objects"]["rhat"] is None  # R-hat needs two chains
-    from sppl.report import write_report
+    from sppl.output.report import write_report
 
     page = write_report(out).read_text()
     assert "--chains 4" in page and "traces.png" in page
@@ -194,7 +194,7 @@ def report(two_chains):
 
 def test_the_report_has_every_section_and_its_figures(report):
     page = report.read_text()
-    from sppl.report import EXPLAIN
+    from sppl.output.report import EXPLAIN
 
     for heading in ("The scene in 3D", "The cameras", "Posterior predictive",
                     "The posterior over counts", "Occupancy", "Each MAP object", "Traces",
@@ -218,7 +218,7 @@ def test_the_report_has_every_section_and_its_figures(report):
 
 
 def test_the_report_without_a_truth(two_chains, tmp_path):
-    from sppl.report import write_report
+    from sppl.output.report import write_report
 
     page = write_report(two_chains, out=tmp_path / "r", truth=False).read_text()
     assert "against the truth" not in page and "occupancy.png" in page
@@ -253,7 +253,7 @@ def _hue_pixels(image, colour, min_chroma: float = 60) -> int:
     return int(((norm > min_chroma) & (cosine > 0.95)).sum())
 
 
-# Each unit shape's centre (sppl/geometry.py): where to look for it on the screen.
+# Each unit shape's centre (sppl/model/geometry.py): where to look for it on the screen.
 UNIT_CENTRES = {"box": (0, 0, 0.5), "cylinder": (0, 0, 0.5), "cone": (0, 0, 0.25),
                 "sphere": (0, 0, 1.0)}
 

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from sppl.lang import load_model
-from sppl.posterior import Chain, RunFiles, diagnostics, posterior_arrays
-from sppl.report import (
+from sppl.output.posterior import Chain, RunFiles, diagnostics, posterior_arrays
+from sppl.output.report import (
     CHAIN_COLOURS,
     MATCH_RADIUS,
     _acceptance_table,
@@ -162,7 +162,7 @@ def test_map_against_truth_with_a_wrong_class_and_an_extra_object(model):
 
 
 def test_the_truth_table_shows_the_errors(model):
-    from sppl.report import truth_html
+    from sppl.output.report import truth_html
 
     page = truth_html(model, [cube(0.1, 0.0, s=0.5)], [cube(0.0, 0.0, s=0.6), cone(5.0, 5.0)])
     assert "MAP 1, true 2" in page and "<b>not right</b>" in page
@@ -211,7 +211,7 @@ def test_acceptance_per_move_type_and_per_class():
 
 
 def test_the_summary_block_wraps_instead_of_running_off_the_side():
-    from sppl.report import CSS
+    from sppl.output.report import CSS
 
     pre = re.search(r"pre \{([^}]*)\}", CSS).group(1)
     assert "white-space: pre-wrap" in pre and "overflow-x" not in pre
@@ -219,7 +219,7 @@ def test_the_summary_block_wraps_instead_of_running_off_the_side():
 
 def test_marginal_tick_labels_do_not_overlap(monkeypatch, tmp_path):
     """A narrow panel over a narrow range (-0.24 to -0.16) had five labels run together."""
-    import sppl.report as report
+    import sppl.output.report as report
 
     figures = []
     monkeypatch.setattr(report, "_save", lambda fig, folder, name: figures.append(fig) or name)
@@ -281,7 +281,7 @@ def test_rhat_and_bulk_and_tail_ess_of_each_label_invariant_quantity():
     for name in ("n_objects", "log joint", "image_sigma"):
         d = diag[name]
         assert d["rhat"] is not None and d["ess_bulk"] > 0 and d["ess_tail"] > 0, name
-    try:  # the ESS of the 5% and 95% quantiles, as sppl.posterior asks for it
+    try:  # the ESS of the 5% and 95% quantiles, as sppl.output.posterior asks for it
         tail = arviz_stats.ess(lp, chain_axis=0, draw_axis=1, method="tail", prob=(0.05, 0.95))
     except TypeError:  # arviz-stats 1.x takes no prob
         tail = arviz_stats.ess(lp, chain_axis=0, draw_axis=1, method="tail")

@@ -1,4 +1,4 @@
-"""What the report's 3D view is given (sppl/report_view.py), checked against sppl's own geometry
+"""What the report's 3D view is given (sppl/output/report_view.py), checked against sppl's own geometry
 on hand-made runs: each part's matrix and colour, the best-so-far frames, the ghosts' opacity,
 mesh parts and their box proxies, and JSON that cannot close its <script> element.
 
@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 from test_report_computations import CLASSES, ROOT, cube, sphere
 
-from sppl import report_view
 from sppl.lang import load_model
-from sppl.posterior import Chain, RunFiles
-from sppl.report_view import _embed_json, timeline, view_data, view_html
-from sppl.simulate import objects_from_dict
+from sppl.model.simulate import objects_from_dict
+from sppl.output import report_view
+from sppl.output.posterior import Chain, RunFiles
+from sppl.output.report_view import _embed_json, timeline, view_data, view_html
 
 
 @pytest.fixture(scope="module")
@@ -105,7 +105,7 @@ def test_a_map_the_thinned_samples_missed_ends_its_chain(model):
 
 
 def test_cameras_carry_their_pose_and_intrinsics(model):
-    from sppl.camera import Camera, look_at
+    from sppl.data.camera import Camera, look_at
 
     cam = Camera("front", 64, 48, 50.0, 52.0, 30.0, 25.0, look_at((3.0, -2.0, 2.0), (0, 0, 0.3)))
     data = view_data(model, run_of([sample(1, 0.0)]), [], None, [], [cam], (-2.0, 2.0, -2.0, 2.0))
@@ -116,7 +116,7 @@ def test_cameras_carry_their_pose_and_intrinsics(model):
 
 
 def test_a_mesh_part_carries_its_triangles_or_its_bounding_box(monkeypatch, tmp_path):
-    from sppl.geometry import unit_mesh
+    from sppl.model.geometry import unit_mesh
 
     tabletop = load_model(ROOT / "models" / "tabletop.scn")
     mug = {"class": "mug", "params": {"x": 0.1, "y": -0.1, "a": 0.5, "k": 1.2, "c": "red"}}

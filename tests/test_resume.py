@@ -19,12 +19,13 @@ import numpy as np
 import pytest
 from test_cli import CAMERAS, SCENE
 
-from sppl.checkpoint import CHECKPOINT
 from sppl.cli import main
+from sppl.data.observations import load_observations
 from sppl.lang import load_model
-from sppl.observations import load_observations
-from sppl.run import run_chain, run_chains
-from sppl.samples import read_samples
+from sppl.output.samples import read_samples
+from sppl.runs.chains import run_chains
+from sppl.runs.checkpoint import CHECKPOINT
+from sppl.runs.run import run_chain
 
 STEPS = 16  # N; the reference run draws 2N
 SEED = 5
@@ -103,7 +104,7 @@ def test_killed_mid_sample_write_resumes_exactly(setup, tmp_path, checkpoint_sec
 
 def test_killed_mid_checkpoint_write_keeps_the_previous_checkpoint(setup, tmp_path, monkeypatch):
     """The process dies with the new checkpoint half written: the old one is still whole."""
-    import sppl.checkpoint as checkpoint
+    import sppl.runs.checkpoint as checkpoint
 
     model, obs, _, reference = setup
     out = tmp_path / "run"
@@ -229,9 +230,9 @@ import os, signal, sys
 from pathlib import Path
 import numpy as np
 from sppl.lang import load_model
-from sppl.observations import load_observations
-from sppl.run import run_chain
-from sppl.samples import SampleWriter
+from sppl.data.observations import load_observations
+from sppl.runs.run import run_chain
+from sppl.output.samples import SampleWriter
 
 model, obs, out, step, torn = sys.argv[1], sys.argv[2], Path(sys.argv[3]), int(sys.argv[4]), sys.argv[5] == "torn"
 write = SampleWriter.write

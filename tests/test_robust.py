@@ -1,4 +1,4 @@
-"""The robust likelihoods (sppl/robust.py): their numpy densities against scipy, their samplers
+"""The robust likelihoods (sppl/model/robust.py): their numpy densities against scipy, their samplers
 against their densities, their GL-side terms against the numpy twin (absolute nats), and the
 sampler's checks with them in the loop.
 
@@ -14,21 +14,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy import stats
 from false_alarms import EACH, SLOW_EACH
+from scipy import stats
 from test_fast_scoring import _setting as fast_setting
 
 from sppl import cli, verify
-from sppl.chain import Sampler
+from sppl.data.observations import load_observations
 from sppl.errors import SpplError
+from sppl.infer.chain import Sampler
 from sppl.lang import load_model
-from sppl.likelihoods import get_likelihood, gpu_statistics
-from sppl.lockstep import sweep_together
-from sppl.model import RENDER_GROUP
-from sppl.observations import load_observations
-from sppl.robust import Mixture, StudentT
-from sppl.scoring import ReferenceScorer, Scorer
-from sppl.simulate import sample_noise, sample_objects
+from sppl.model.likelihoods import get_likelihood, gpu_statistics
+from sppl.model.robust import Mixture, StudentT
+from sppl.model.simulate import sample_noise, sample_objects
+from sppl.model.types import RENDER_GROUP
+from sppl.runs.lockstep import sweep_together
+from sppl.scoring.scorer import ReferenceScorer, Scorer
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures" / "robust"
 # Absolute tolerance of the GL-side log density against the numpy twin, per term: float32

@@ -9,15 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sppl.experiment import simulate
+from sppl.data.observations import load_observations
 from sppl.lang import load_model
-from sppl.observations import load_observations
-from sppl.posterior import load_run, posterior_arrays
-from sppl.run import ChainRun
-from sppl.samples import format_summary, read_samples, summarise
-from sppl.seen import SeenPass, seen_reference
-from sppl.simulate import load_scene, objects_from_dict
-from sppl.trace import make_object
+from sppl.model.simulate import load_scene, objects_from_dict
+from sppl.model.trace import make_object
+from sppl.output.posterior import load_run, posterior_arrays
+from sppl.output.samples import format_summary, read_samples, summarise
+from sppl.render.seen import SeenPass, seen_reference
+from sppl.runs.experiment import simulate
+from sppl.runs.run import ChainRun
 
 ROOT = Path(__file__).resolve().parent.parent
 MODEL = ROOT / "models" / "shapes.scn"
@@ -75,7 +75,7 @@ def test_the_id_pass_agrees_with_its_twin_on_random_scenes(require_gl):
                                 cx=c.cx / 4, cy=c.cy / 4) for c in obs.cameras]
     fast = SeenPass(model, cams)
     rng = np.random.default_rng(3)
-    from sppl.simulate import sample_objects
+    from sppl.model.simulate import sample_objects
 
     marks = 0
     for _ in range(12):

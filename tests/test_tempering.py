@@ -1,4 +1,4 @@
-"""Parallel tempering (sppl/tempering.py): the ladder of powers, the swap's ratio against
+"""Parallel tempering (sppl/infer/tempering.py): the ladder of powers, the swap's ratio against
 exact tempered posteriors, and a tempered run that resumes exactly.
 
 The exact check needs tempered posteriors in closed form: a scorer whose log likelihood is
@@ -25,13 +25,13 @@ from test_resume import (
 )
 from toys import ball_class, toy_model
 
-from sppl import tempering
-from sppl.checkpoint import CHECKPOINT
+from sppl.infer import tempering
 from sppl.lang import compile_model
-from sppl.run import run_chain
-from sppl.samples import read_samples
-from sppl.scoring import PriorScorer
-from sppl.trace import make_object
+from sppl.model.trace import make_object
+from sppl.output.samples import read_samples
+from sppl.runs.checkpoint import CHECKPOINT
+from sppl.runs.run import run_chain
+from sppl.scoring.scorer import PriorScorer
 from sppl.verify import chisquare_gof
 
 GAIN = 1.2

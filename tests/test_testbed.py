@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sppl.data.observations import load_observations
 from sppl.lang import load_model
-from sppl.observations import load_observations
-from sppl.simulate import load_scene
+from sppl.model.simulate import load_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 TESTBED = ROOT / "benchmarks" / "testbed"

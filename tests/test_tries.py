@@ -1,4 +1,4 @@
-"""Multiple-try births, deaths and replaces (sppl/tries.py): exact for the set-valued
+"""Multiple-try births, deaths and replaces (sppl/infer/tries.py): exact for the set-valued
 posterior, checked the way every jump is (prior recovery, Geweke, each move and its reverse),
 and the checks fail when the multiple-try ratio is wrong."""
 
@@ -12,10 +12,11 @@ from false_alarms import EACH
 from test_verify import seen_world
 from toys import ball_class, block_class, toy_model
 
-from sppl import tries, verify
-from sppl.chain import Sampler
-from sppl.scoring import PriorScorer
-from sppl.simulate import sample_objects
+from sppl import verify
+from sppl.infer import tries
+from sppl.infer.chain import Sampler
+from sppl.model.simulate import sample_objects
+from sppl.scoring.scorer import PriorScorer
 
 
 def with_tries(model, m):

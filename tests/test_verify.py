@@ -20,15 +20,16 @@ from false_alarms import EACH, SLOW_EACH
 from scipy import stats
 from toys import COLOURS, ball_class, block_class, toy_model
 
-from sppl import cli, moves, verify
-from sppl.chain import Sampler
-from sppl.distributions import Categorical, Gamma, Normal, Uniform
-from sppl.domains import Finite, Interval, Periodic, Positive, Real
-from sppl.geometry import Part, rotation_z, scaling, translation
+from sppl import cli, verify
+from sppl.infer import moves
+from sppl.infer.chain import Sampler
 from sppl.lang import load_model
-from sppl.likelihoods import Gaussian
-from sppl.model import InferenceSettings, Model, ObjectClass, Parameter, Sensor
-from sppl.scoring import PriorScorer
+from sppl.model.distributions import Categorical, Gamma, Normal, Uniform
+from sppl.model.domains import Finite, Interval, Periodic, Positive, Real
+from sppl.model.geometry import Part, rotation_z, scaling, translation
+from sppl.model.likelihoods import Gaussian
+from sppl.model.types import InferenceSettings, Model, ObjectClass, Parameter, Sensor
+from sppl.scoring.scorer import PriorScorer
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures" / "verify"
 
@@ -254,7 +255,7 @@ def test_replace_from_a_known_state_by_hand():
 
 
 def sampler_object(model, cls, seed):
-    from sppl.trace import make_object
+    from sppl.model.trace import make_object
 
     return make_object(model, cls, cls.sample_prior(np.random.default_rng(seed)))
 
@@ -450,7 +451,7 @@ def test_geweke_sees_a_simulator_that_leaves_out_the_static_scenery(require_gl, 
         parts = [p for o in objects for p in o.parts]
         return {i: self.renderer.render(parts, s.camera) for i, s in enumerate(self.specs)}
 
-    monkeypatch.setattr(verify._Simulator, "render", render)
+    monkeypatch.setattr(verify.Simulator, "render", render)
     model = load_model(root / "models" / "tabletop.scn")
     report = verify.geweke(model, chains=40, length=10, seed=3, mc_draws=2000, alpha=EACH)
     assert not report.passed
@@ -514,7 +515,9 @@ def test_geweke_and_sbc_start_from_scenes_in_random_order(require_gl, monkeypatc
         started.append(tuple(o.cls.name for o in scene[0]))
         return scene
 
-    monkeypatch.setattr(verify, "prior_scene", recorded)
+    # Each check looks the scene up in its own module.
+    monkeypatch.setattr(verify.calibration, "prior_scene", recorded)
+    monkeypatch.setattr(verify.joint, "prior_scene", recorded)
     verify.sbc(model, replicates=30, draws=1, thin=1, seed=1)
     verify.geweke(model, chains=30, length=1, seed=1, mc_draws=10)
     assert len(started) == 60

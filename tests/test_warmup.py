@@ -1,4 +1,4 @@
-"""The warm-up (sppl/warmup.py): adapted steps and an annealed likelihood, only before the
+"""The warm-up (sppl/infer/warmup.py): adapted steps and an annealed likelihood, only before the
 samples that count; after it the chain is the fixed posterior kernel that the checks verify."""
 
 from __future__ import annotations
@@ -13,12 +13,13 @@ from test_verify import seen_world
 from toys import ball_class, block_class, toy_model
 
 from sppl import verify
-from sppl.chain import Sampler
 from sppl.errors import ModelError
+from sppl.infer import moves
+from sppl.infer.chain import Sampler
+from sppl.infer.warmup import FACTOR_RANGE, TARGET, Warmup, warmup_sweeps
 from sppl.lang import compile_model
-from sppl.scoring import PriorScorer
-from sppl.simulate import sample_objects
-from sppl.warmup import FACTOR_RANGE, TARGET, Warmup, warmup_sweeps
+from sppl.model.simulate import sample_objects
+from sppl.scoring.scorer import PriorScorer
 
 
 def warm(model, adapt=0, anneal=0, anneal_from=0.01):
@@ -141,7 +142,7 @@ def test_after_the_warm_up_the_ratios_are_the_posterior_ones(require_gl):
     the schedule is checked directly: during the annealing the ratio of a move is the tempered
     one, and from the first sweep after it the posterior's, exactly."""
     model = warm(seen_world(), adapt=30, anneal=20)
-    sim = verify._Simulator(model, verify.verify_cameras(model, 8), _renderer(model))
+    sim = verify.Simulator(model, verify.verify_cameras(model, 8), _renderer(model))
     rng = np.random.default_rng(1)
     objects = sample_objects(model, rng)
     while not objects:
@@ -151,7 +152,7 @@ def test_after_the_warm_up_the_ratios_are_the_posterior_ones(require_gl):
     trace = sampler.make_trace(objects, noise)
     ratios = []
     for sweep in range(40):
-        proposal = verify.moves.propose_noise(model, trace, "image", "sigma", rng)
+        proposal = moves.propose_noise(model, trace, "image", "sigma", rng)
         new = sampler.evaluate(trace, proposal)
         beta = sampler.warmup.beta
         expected = (new.log_prior - trace.log_prior

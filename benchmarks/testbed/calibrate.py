@@ -40,11 +40,11 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 sys.path.insert(0, str(ROOT))
 
+from sppl.data.observations import load_observations
 from sppl.lang import compile_model
-from sppl.likelihoods import get_likelihood
-from sppl.observations import load_observations
+from sppl.model.likelihoods import get_likelihood
+from sppl.model.simulate import objects_from_dict
 from sppl.render import Renderer
-from sppl.simulate import objects_from_dict
 
 MODEL = ROOT / "models" / "blocks.scn"
 LAMBERT_FLOOR = 0.894  # the floor's lambert term under blocks.scn's light (0.4, -0.3, 1)

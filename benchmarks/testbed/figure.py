@@ -31,10 +31,10 @@ _spec.loader.exec_module(tiles)
 tiles.SCALE = 2
 _tile, _depth_image = tiles._tile, tiles._depth_image
 
+from sppl.data.observations import load_observations  # noqa: E402
 from sppl.lang import load_model  # noqa: E402
-from sppl.observations import load_observations  # noqa: E402
+from sppl.model.simulate import objects_from_dict  # noqa: E402
 from sppl.render import Renderer  # noqa: E402
-from sppl.simulate import objects_from_dict  # noqa: E402
 
 SCENES = ("blocks_metal", "blocks_shadows", "blocks_occlusion")
 

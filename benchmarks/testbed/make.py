@@ -42,8 +42,8 @@ sys.path.insert(0, str(HERE.parent))
 from scenes_in_view import draw_in_view
 
 from sppl.cli import main as sppl
+from sppl.data.observations import load_cameras
 from sppl.lang import load_model
-from sppl.observations import load_cameras
 
 SEED = 2024
 MAX_OBJECTS = 5
@@ -127,7 +127,7 @@ def simulation_noise(model, scene: dict) -> dict:
     true Gaussian scale, no outliers (a robust likelihood's outlier share at 0 draws exactly
     the Gaussian noise Cycles' folder has), and, where the model leaves the lighting latent,
     the light Cycles' sun shines from and the ambient share that matches its sky (CYCLES_AMBIENT)."""
-    from sppl.model import RENDER_GROUP
+    from sppl.model.types import RENDER_GROUP
 
     noise = {}
     for kind, parameters in model.noise_groups:

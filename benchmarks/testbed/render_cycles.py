@@ -15,7 +15,7 @@ with a sun that casts shadows and light bounced off the floor and the objects, m
 glossy metal (Principled BSDF, metal where an object's ``material`` is ``metal``), edges
 anti-aliased by Cycles' pixel filter, Monte Carlo noise, and mixed depth pixels at edges as
 Cycles' Z pass leaves them. What matches the model: every part's shape, size and pose (each
-part's own world-from-unit matrix on the unit shapes of ``sppl.geometry``), the ground, and
+part's own world-from-unit matrix on the unit shapes of ``sppl.model.geometry``), the ground, and
 the colours, which are the palette's values taken as sRGB: converted to linear for Blender's
 base colours, and the linear render converted back to sRGB (Blender's "Standard" view), so a
 surface lit at unit strength shows the palette's very values. sppl reads the PNGs as they are
@@ -44,10 +44,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from sppl.geometry import unit_mesh  # noqa: E402
+from sppl.data.observations import Frame, load_cameras, write_observations  # noqa: E402
 from sppl.lang import load_model  # noqa: E402
-from sppl.observations import Frame, load_cameras, write_observations  # noqa: E402
-from sppl.simulate import load_scene, scene_dict  # noqa: E402
+from sppl.model.geometry import unit_mesh  # noqa: E402
+from sppl.model.simulate import load_scene, scene_dict  # noqa: E402
 
 SAMPLES = 128  # Cycles' samples per pixel
 SENSOR_SIGMA = 0.02  # the sensors' true noise: RGB in [0, 1], depth in metres
@@ -78,7 +78,7 @@ def _material(bpy, name, colour, metal):
 
 
 def _mesh(bpy, primitive):
-    """The unit shape of sppl.geometry as a Blender mesh: round ones smooth-shaded."""
+    """The unit shape of sppl.model.geometry as a Blender mesh: round ones smooth-shaded."""
     if primitive in bpy.data.meshes:
         return bpy.data.meshes[primitive]
     tri = unit_mesh(primitive)

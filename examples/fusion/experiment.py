@@ -23,8 +23,8 @@ import json
 import sys
 from pathlib import Path
 
-from sppl import experiment
-from sppl.report import camera_figures
+from sppl.output.report import camera_figures
+from sppl.runs import experiment
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
@@ -98,8 +98,8 @@ def posterior_recovery(run: Path, truth, draws: int = 400) -> float:
     """The share of the run's samples after burn-in (pooled chains, ``draws`` evenly spaced)
     in which every true object has an estimated one of its class and colour within 0.15 m:
     how much of the posterior, not just its MAP, has the scene right."""
-    from sppl.posterior import load_run
-    from sppl.report import _all_samples, _even
+    from sppl.output.posterior import load_run
+    from sppl.output.report import _all_samples, _even
 
     samples = _even(_all_samples(load_run(run)), draws)
     found = [experiment.recovery(s["objects"], truth).found == len(truth) for s in samples]
@@ -109,10 +109,10 @@ def posterior_recovery(run: Path, truth, draws: int = 400) -> float:
 def figures(model_path, runs, truth, images: Path, obs) -> None:
     from matplotlib.figure import Figure
 
+    from sppl.data.observations import load_observations
     from sppl.lang import load_model
-    from sppl.observations import load_observations
-    from sppl.posterior import load_run
-    from sppl.report import _all_samples, _even, plot_occupancy
+    from sppl.output.posterior import load_run
+    from sppl.output.report import _all_samples, _even, plot_occupancy
 
     images.mkdir(parents=True, exist_ok=True)
     model = load_model(model_path)

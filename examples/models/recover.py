@@ -13,7 +13,7 @@ user would type,
         --scene examples/models/MODEL/scene.json --out RUN/MODEL/obs --seed SEED
     sppl sample models/MODEL.scn --obs RUN/MODEL/obs --steps STEPS --seed SEED --out RUN/MODEL/run
 
-and compares the MAP scene that `sample` reports with the truth (``sppl.compare``: objects
+and compares the MAP scene that `sample` reports with the truth (``sppl.output.compare``: objects
 matched by their ground position). A model is recovered when the MAP has as many objects as
 the truth, every matched pair has the same class and the same categorical values (colours,
 sizes, materials), and every position is within the model's tolerance. It prints a table
@@ -35,7 +35,7 @@ ROOT = HERE.parent.parent
 sys.path.insert(0, str(ROOT))
 
 from sppl.cli import main as sppl  # noqa: E402
-from sppl.compare import compare_scenes  # noqa: E402
+from sppl.output.compare import compare_scenes  # noqa: E402
 
 MODELS = ("shapes", "blocks", "tabletop", "shapes_plus")
 # How far (metres, on the ground plane) a MAP object may be from the true one: a tenth of the
@@ -91,12 +91,12 @@ def truth_log_joint(scn: Path, obs: Path) -> float:
     another scene (the model's)."""
     import numpy as np
 
-    from sppl.chain import Sampler
+    from sppl.data.observations import load_observations
+    from sppl.infer.chain import Sampler
     from sppl.lang import load_model
-    from sppl.observations import load_observations
+    from sppl.model.simulate import load_scene
     from sppl.render import Renderer
-    from sppl.scoring import Scorer
-    from sppl.simulate import load_scene
+    from sppl.scoring.scorer import Scorer
 
     model = load_model(scn)
     renderer = Renderer(model.render)

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sppl import experiment
+from sppl.runs import experiment
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
@@ -58,11 +58,11 @@ def main(argv=None) -> int:
     summary = experiment.sample(model_path, obs, run, steps=steps, seed=args.seed,
                                 chains=args.chains)
 
+    from sppl.data.observations import load_observations
     from sppl.lang import load_model
-    from sppl.observations import load_observations
-    from sppl.posterior import load_run
-    from sppl.report import _all_samples, write_report
-    from sppl.simulate import sample_objects
+    from sppl.model.simulate import sample_objects
+    from sppl.output.posterior import load_run
+    from sppl.output.report import _all_samples, write_report
 
     page = write_report(run)
     model = load_model(model_path)
@@ -144,7 +144,7 @@ class Shadow:
 def occupancy_figure(model, samples, map_objects, truth, cameras, shadow, path) -> None:
     from matplotlib.figure import Figure
 
-    from sppl.report import _even, plot_occupancy
+    from sppl.output.report import _even, plot_occupancy
 
     fig = Figure(figsize=(7.0, 4.8), layout="constrained")
     ax = fig.subplots()

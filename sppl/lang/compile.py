@@ -20,10 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from ..domains import Finite, Interval, Periodic, Positive, Real
 from ..errors import ModelError, ModelErrors, Span, SpplError
-from ..geometry import Part
-from ..model import (
+from ..model.domains import Finite, Interval, Periodic, Positive, Real
+from ..model.geometry import Part
+from ..model.types import (
     LIGHTING,
     MAX_SCENE_OBJECTS,
     RENDER_GROUP,
@@ -165,7 +165,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
         self.sensors: dict[str, _PendingSensor] = {}
         self.no_overlap = False
         self.max_objects: int | None = None
-        self.region = None  # sppl.region.Region or CamerasRegion
+        self.region = None  # sppl.model.region.Region or CamerasRegion
         self.region_span: Span | None = None
         self.restrictions: dict[str, object] = {}
         self.static_parts: list[Part] = []
@@ -643,7 +643,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
             self.max_objects = self._whole(arg[0], "`max_objects`")
 
     def _region(self, node: ast.Region) -> None:
-        from .. import region as regions
+        from ..model import region as regions
 
         kind = node.kind.text
         if self.region_span is not None:
@@ -696,8 +696,8 @@ class _Compiler(ImportsMixin, ShapesMixin):
 
     def _restrict(self) -> None:
         """Each placed class's position prior restricted to a box or polygon region, with its
-        normaliser (a camera region waits for the cameras: ``sppl.region.bind``)."""
-        from .. import region as regions
+        normaliser (a camera region waits for the cameras: ``sppl.model.region.bind``)."""
+        from ..model import region as regions
 
         if self.region is None or isinstance(self.region, regions.CamerasRegion):
             return
@@ -834,7 +834,7 @@ class _Compiler(ImportsMixin, ShapesMixin):
     ) -> None:
         """Look the likelihood up (third-party ones included), take its options, and check
         that the sensor gives a prior for each of its noise parameters and no others."""
-        from ..likelihoods import available_likelihoods, get_likelihood
+        from ..model.likelihoods import available_likelihoods, get_likelihood
 
         rule = node.rule
         ident = rule.func if isinstance(rule, ast.Call) else rule

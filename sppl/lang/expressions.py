@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..errors import Span
-from ..model import Values
+from ..model.types import Values
 from . import ast
 
 Numeric = float | Callable[[Values], float]

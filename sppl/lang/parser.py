@@ -17,7 +17,6 @@ from lark.lexer import PatternStr
 from ..errors import ModelError, Span
 from . import ast
 
-
 # The comments of the parse in progress, collected by the lexer (lark drops ignored tokens).
 _comments: list[Token] = []
 

@@ -21,7 +21,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from ..distributions import (
+from ..errors import ModelError, Span
+from ..model.distributions import (
     Beta,
     Categorical,
     Dependent,
@@ -35,9 +36,8 @@ from ..distributions import (
     TruncatedNormal,
     Uniform,
 )
-from ..domains import Domain, Finite, Integer, Interval, Periodic, Positive, Real
-from ..errors import ModelError, Span
-from ..model import Parameter, Values
+from ..model.domains import Domain, Finite, Integer, Interval, Periodic, Positive, Real
+from ..model.types import Parameter, Values
 from . import ast
 from .expressions import (
     CATEGORICAL_PARAMETER,

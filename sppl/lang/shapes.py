@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import MESH_PREFIX, ROUND_SECTIONS, Part, load_mesh, rotation_z
-from ..model import Values
+from ..model.geometry import MESH_PREFIX, ROUND_SECTIONS, Part, load_mesh, rotation_z
+from ..model.types import Values
 from . import ast
 from .expressions import (
     Colour,
@@ -28,7 +28,7 @@ from .expressions import (
 )
 
 # Each primitive's arguments, and the unit shapes it is made of with the matrix that scales
-# each (see sppl/geometry.py for the unit shapes).
+# each (see sppl/model/geometry.py for the unit shapes).
 _PRIMITIVES: dict[str, tuple[str, ...]] = {
     "box": ("width", "depth", "height"),
     "cylinder": ("radius", "height"),

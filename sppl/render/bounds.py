@@ -13,9 +13,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..camera import Camera
+from ..data.camera import Camera
 from ..errors import RenderError
-from ..geometry import MESH_PREFIX, PRIMITIVES, Part, unit_mesh
+from ..model.geometry import MESH_PREFIX, PRIMITIVES, Part, unit_mesh
 
 # Rows and columns as half-open ranges: (row0, row1, col0, col1).
 Rect = tuple[int, int, int, int]

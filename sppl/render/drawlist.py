@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..geometry import Part
+from ..model.geometry import Part
 from .bounds import (
     INSIDE_MARGIN,
     MARGIN,

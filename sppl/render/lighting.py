@@ -18,8 +18,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..errors import RenderError
-from ..geometry import Part, linear_inverse
-from ..model import RenderSettings
+from ..model.geometry import Part, linear_inverse
+from ..model.types import RenderSettings
 
 MAX_CASTERS = 252  # lighting.glsl's: the block then fits GL's guaranteed 16 KiB
 CASTER_KINDS = {"box": 0.0, "sphere": 1.0, "cylinder": 2.0, "cone": 3.0}

@@ -1,6 +1,6 @@
 """Likelihood terms computed where the pixels are: on the GL side.
 
-The fast path of ``sppl.scoring``. Each camera's observation is uploaded once as an RGBA float
+The fast path of ``sppl.scoring.scorer``. Each camera's observation is uploaded once as an RGBA float
 texture (RGB, and depth in alpha); a hypothesis is drawn with a fragment shader that writes
 each pixel's squared-residual terms instead of its colour (``shaders/terms.frag``; for a robust
 likelihood its log densities, ``shaders/likelihood.glsl``, at noise values set by
@@ -33,10 +33,10 @@ from typing import TYPE_CHECKING
 import moderngl
 import numpy as np
 
-from ..camera import Camera
+from ..data.camera import Camera
 from ..errors import RenderError
-from ..geometry import Part, linear_inverse
-from ..model import RenderSettings
+from ..model.geometry import Part, linear_inverse
+from ..model.types import RenderSettings
 from .bounds import Rect, closed, union
 from .context import claim_state, gl_context
 from .kernels import compiled

@@ -14,9 +14,9 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from ..camera import Camera
-from ..geometry import Part, unit_mesh
-from ..model import RenderSettings
+from ..data.camera import Camera
+from ..model.geometry import Part, unit_mesh
+from ..model.types import RenderSettings
 
 # Rays per batch: bounds the (rays x triangles) temporaries to a few tens of megabytes.
 BATCH = 256

@@ -2,7 +2,7 @@
 
 Each primitive's unit mesh lives on the GPU once; a part is drawn as that mesh under its own
 matrix and colour, so a new hypothesis costs a few uniform writes, not a mesh upload. Images come
-back as float32 arrays in the camera's conventions (see ``sppl.camera``).
+back as float32 arrays in the camera's conventions (see ``sppl.data.camera``).
 
 Round shapes are the exception (``RAY_CAST``): a tessellated sphere needs a thousand triangles
 to look round, and on a software rasteriser the setup of a cone's or a cylinder's hundred or two
@@ -21,10 +21,10 @@ import moderngl
 import numpy as np
 import trimesh
 
-from ..camera import Camera
+from ..data.camera import Camera
 from ..errors import RenderError
-from ..geometry import MESH_PREFIX, PRIMITIVES, Part, linear_inverse, unit_mesh
-from ..model import RenderSettings
+from ..model.geometry import MESH_PREFIX, PRIMITIVES, Part, linear_inverse, unit_mesh
+from ..model.types import RenderSettings
 from .bounds import closed, contains
 from .context import claim_state, gl_context
 from .lighting import BLOCK_BYTES, block, caster_rows, check_light

@@ -1,0 +1,169 @@
+"""Where a birth puts its new object: from the class's prior, or near what is unexplained.
+
+A birth drawn from the prior almost never lands on an object the cameras see: the prior on
+position is wide and the objects are small. So a birth may instead place the object near a
+point where the observations disagree with the current hypothesis: a depth pixel nearer than
+what is rendered there (back-projected with its measured depth), or an RGB pixel whose colour
+is off (its ray followed down to the ground plane).
+
+The proposal stays exact. Its density over the two position parameters is the mixture
+
+    q(x, y | state) = (1 - w) p(x, y) + w (1/M) sum_i Normal((x, y); point_i, h^2 I)
+
+where p(x, y) is the class's position prior (restricted to the model's region if it has one,
+sppl/model/region.py), the points are a deterministic function of the state (the renders of its
+objects), and every other parameter is drawn from its prior. A death's reverse is a birth from the state
+after the death, so the death's ratio evaluates the same density with the points of that
+state; docs/inference.md has the derivation. ``w`` is the model's ``data_birth`` setting
+(0 gives the thesis's prior-only births).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+from ..model.types import Model, ObjectClass
+
+# A depth pixel is unexplained when it is nearer than the render by more than this, in metres.
+DEPTH_GAP = 0.1
+# An RGB pixel is unexplained when its mean absolute colour difference exceeds this.
+COLOUR_GAP = 0.15
+# At most this many points describe a state (an even stride over the unexplained pixels), so
+# that the density costs microseconds.
+MAX_POINTS = 400
+# A blob of unexplained pixels seeds a fitted birth when it has this many pixels, and a state
+# has at most this many seeds (its largest blobs), so that a fitted death's choice among them
+# stays a short list.
+SEED_PIXELS = 4
+MAX_SEEDS = 8
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+class BirthProposal:
+    def __init__(self, model: Model, scorer=None) -> None:
+        self.model = model
+        self.weight = model.inference.data_birth if scorer is not None else 0.0
+        self.spread = model.inference.data_birth_spread
+        self.terms = list(getattr(scorer, "terms", []))
+        self.scorer = scorer
+        # Per camera: world ray directions, the ray-to-axis factor, and the centre.
+        self.rays = {
+            t.frame: (t.camera.ray_directions(), t.camera.ray_to_z(), t.camera.position)
+            for t in self.terms
+        }
+
+    # -- the points a state leaves unexplained ----------------------------------------------
+
+    def points(self, trace) -> np.ndarray:
+        if self.weight == 0.0:
+            return np.empty((0, 2))
+        return _cached(trace, "birth_points", self._points)
+
+    def _points(self, renders) -> np.ndarray:
+        found = [pts for _, pts in self._unexplained(renders)]
+        pts = np.concatenate(found) if found else np.empty((0, 2))
+        if len(pts) > MAX_POINTS:
+            pts = pts[:: math.ceil(len(pts) / MAX_POINTS)]
+        return pts
+
+    def _unexplained(self, renders):
+        """Per camera term, the labelled blobs of pixels the render leaves unexplained and
+        the ground points (x, y) of those pixels, in the order ``labels[labels > 0]`` reads
+        them: a depth pixel back-projected with its measured depth, an RGB pixel's ray
+        followed down to the ground (an RGB pixel whose ray never meets the ground is
+        dropped, label and all)."""
+        for t in self.terms:
+            dirs, ray_to_z, centre = self.rays[t.frame]
+            rendered = self.scorer.rendered(renders, t)
+            if t.kind == "depth":
+                near = t.observed < rendered - DEPTH_GAP
+                near &= t.observed < t.camera.depth_max * (1.0 - 1e-3)
+                if t.valid is not None:
+                    near &= t.valid
+                near = _blobs(near)
+                dist = t.observed[near]
+                if t.camera.depth_type == "z":
+                    dist = dist / ray_to_z[near]
+                pts = centre + dirs[near] * dist[:, None]
+            elif t.kind == "image":
+                near = _blobs(np.abs(t.observed - rendered).mean(axis=-1) > COLOUR_GAP)
+                near &= dirs[..., 2] < -1e-6
+                d = dirs[near]
+                s = -centre[2] / d[:, 2]
+                pts = centre + d * s[:, None]
+            else:
+                continue
+            yield near, pts[:, :2]
+
+    def seeds(self, trace) -> np.ndarray:
+        """Ground points (S, 2) where whole objects seem to be missing from ``trace``: per
+        camera, each blob of at least SEED_PIXELS unexplained pixels gives the median of its
+        pixels' ground points; the largest MAX_SEEDS blobs over all cameras, largest first.
+        A deterministic function of the state's renders, as a fitted birth's density needs
+        (sppl.infer.fitted_birth)."""
+        return _cached(trace, "birth_seeds", self._seeds)
+
+    def _seeds(self, renders) -> np.ndarray:
+        found = []  # (pixels, order found, point)
+        for mask, pts in self._unexplained(renders):
+            labels, count = ndimage.label(mask, structure=_CROSS)
+            of_pixel = labels[mask]
+            for blob in range(1, count + 1):
+                mine = pts[of_pixel == blob]
+                if len(mine) >= SEED_PIXELS:
+                    found.append((len(mine), len(found), np.median(mine, axis=0)))
+        found.sort(key=lambda f: (-f[0], f[1]))
+        return np.array([f[2] for f in found[:MAX_SEEDS]]).reshape(-1, 2)
+
+    # -- sampling and density ------------------------------------------------------------------
+
+    def sample(self, cls: ObjectClass, trace, rng: np.random.Generator) -> dict[str, Any]:
+        values = cls.sample_prior(rng)
+        pts = self.points(trace) if cls.position else np.empty((0, 2))
+        if len(pts) and rng.random() < self.weight:
+            centre = pts[int(rng.integers(len(pts)))]
+            xy = centre + self.spread * rng.standard_normal(2)
+            values[cls.position[0]], values[cls.position[1]] = float(xy[0]), float(xy[1])
+        return values
+
+    def log_density(self, cls: ObjectClass, values: Mapping[str, Any], trace) -> float:
+        """log q(values | state) of a birth of class ``cls`` from the state ``trace``."""
+        pts = self.points(trace) if cls.position else np.empty((0, 2))
+        if not len(pts):
+            return cls.log_prior(values)
+        x, y = values[cls.position[0]], values[cls.position[1]]
+        # The other parameters are drawn from their priors; none of them depends on the
+        # position (the compiler only declares a position that nothing depends on). The
+        # position's prior is the class's, restricted to the model's region if it has one.
+        rest = cls.log_prior(values, only=[n for n in cls.parameter_names if n not in cls.position])
+        log_prior_xy = cls.log_prior(values, only=cls.position)
+        d2 = ((pts - (x, y)) ** 2).sum(axis=1)
+        h2 = self.spread**2
+        log_kernel = -0.5 * d2 / h2 - _LOG_2PI - math.log(h2)
+        log_data = np.logaddexp.reduce(log_kernel) - math.log(len(pts))
+        mix = np.logaddexp(math.log1p(-self.weight) + log_prior_xy, math.log(self.weight) + log_data)
+        return rest + float(mix)
+
+
+_CROSS = ndimage.generate_binary_structure(2, 1)
+
+
+def _cached(trace, key: str, compute) -> np.ndarray:
+    """``compute(trace.renders)``, kept in the trace's cache; no points without renders."""
+    if trace.renders is None:
+        return np.empty((0, 2))
+    cached = trace.cache.get(key)
+    if cached is None:
+        cached = trace.cache[key] = compute(trace.renders)
+    return cached
+
+
+def _blobs(mask: np.ndarray) -> np.ndarray:
+    """Keep pixels whose four neighbours are flagged too: an object leaves a blob of them,
+    sensor noise only scattered single pixels."""
+    return ndimage.binary_erosion(mask, structure=_CROSS)

@@ -1,0 +1,1 @@
+"""What a run leaves: sample files, the posterior file, comparisons with a true scene, reports."""

@@ -1,0 +1,1 @@
+"""Scoring a scene hypothesis against the observations: the fast GL-side scorer and its numpy twin."""
