@@ -1,15 +1,31 @@
-"""Small models built in Python, for tests of the engine that need no model file."""
+"""Small models built in Python with sppl's public API, for tests of the engine that need no
+model file."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from sppl.chain import Sampler
-from sppl.distributions import Categorical, Gamma, Normal, Uniform
-from sppl.domains import Finite, Periodic, Positive, Real
-from sppl.geometry import Part, rotation_z, scaling, translation
-from sppl.model import InferenceSettings, Model, ObjectClass, Parameter, Sensor
-from sppl.scoring import PriorScorer
+from sppl import (
+    Categorical,
+    Finite,
+    Gamma,
+    InferenceSettings,
+    Model,
+    Normal,
+    ObjectClass,
+    Parameter,
+    Part,
+    Periodic,
+    Positive,
+    PriorScorer,
+    Real,
+    Sampler,
+    Sensor,
+    Uniform,
+    rotation_z,
+    scaling,
+    translation,
+)
 
 COLOURS = ("red", "blue")
 
