@@ -2,8 +2,9 @@
 (regenerating what docs/ shows and checking what the docs claim) with -m slow.
 
 What each doc claims is a function of the script's printed output (``occlusion_claims``,
-``single_object_claims``, the fusion verdict): the slow runs check it on a fresh run, and a
-quick test checks it on the output the docs quote, so the claims and the docs cannot drift.
+``single_object_claims``, the fusion verdict): the slow runs check it on a fresh run; the quick
+runs check it on the output the docs quote (so the claims and the docs cannot drift) and read
+their own output with it (so a change to a script or the sampler fails the default tests too).
 """
 
 from __future__ import annotations
@@ -41,10 +42,25 @@ def assert_pngs(folder: Path, names) -> None:
 
 @pytest.mark.parametrize("script", sorted(FIGURES))
 def test_example_runs_quickly_and_draws_its_figures(script, tmp_path, require_gl):
+    """Each script, short; where a doc quotes its output, the claims' parser reads this run's
+    output as it reads the quoted one, so a change to what the script prints (or, for the
+    occlusion example, to what 300 sweeps find) fails here and not only in the slow runs."""
     out = run_example(script, "--quick", "--chains", "1", "--work", tmp_path / "work",
                       "--images", tmp_path / "images")
     assert "figures:" in out
     assert_pngs(tmp_path / "images", FIGURES[script])
+    if script.startswith("occlusion"):
+        quoted = quoted_output("occlusion.md")
+        assert len(SHADOW_ROW.findall(out)) == len(SHADOW_ROW.findall(quoted)) == 3
+        # Even 300 sweeps of one chain put the hidden cone in the cube's shadow.
+        assert occlusion_claims(out) == [] and occlusion_claims(quoted) == []
+    if script.startswith("single_object"):
+        quoted = quoted_output("single_object.md")
+        assert len(MODE_ROW.findall(out)) == 1  # one chain
+        assert len(MODE_ROW.findall(quoted)) == 3 and len(ELSEWHERE_ROW.findall(quoted)) == 1
+        assert single_object_claims(quoted) == []
+        # 300 sweeps do not find the cube; the claims must say so, not fail to read the output.
+        assert any("does not recover" in c for c in single_object_claims(out))
 
 
 def test_fusion_prints_its_table(tmp_path, require_gl):
@@ -78,10 +94,10 @@ def test_recover_scenes_are_scenes_of_their_model_and_in_view(name, require_gl):
     objects seen by every camera of cameras.json."""
     import numpy as np
 
+    from sppl.data.observations import load_cameras
     from sppl.lang import load_model
-    from sppl.observations import load_cameras
+    from sppl.model.simulate import load_scene
     from sppl.render import Renderer
-    from sppl.simulate import load_scene
 
     folder = ROOT / "examples" / "models" / name
     model = load_model(ROOT / "models" / f"{name}.scn")
@@ -194,13 +210,6 @@ def quoted_output(doc: str) -> str:
     return "\n".join(re.findall(r"^```\n(.*?)^```$", text, re.M | re.S))
 
 
-def test_the_claims_hold_for_the_output_the_docs_quote():
-    occlusion, single = quoted_output("occlusion.md"), quoted_output("single_object.md")
-    assert len(SHADOW_ROW.findall(occlusion)) == 3 and occlusion_claims(occlusion) == []
-    assert len(MODE_ROW.findall(single)) == 3 and len(ELSEWHERE_ROW.findall(single)) == 1
-    assert single_object_claims(single) == []
-
-
 def test_the_claims_fail_on_output_that_contradicts_the_docs():
     occlusion = quoted_output("occlusion.md")
     ignored = re.sub(r"^posterior( +)[\d.]+ +[\d.]+ +[\d.]+", r"posterior\g<1>0.100 0.010 0.001",
@@ -243,7 +252,7 @@ def test_four_chains_on_three_shapes_agree_and_report_opens(tmp_path, require_gl
 
 
 def test_recovery_leaves_out_extra_objects_no_camera_sees():
-    from sppl.experiment import MIN_PIXELS, recovery
+    from sppl.runs.experiment import MIN_PIXELS, recovery
 
     truth = [{"class": "cube", "params": {"x": 0.0, "y": 0.0, "s": 0.5, "c": "red"}}]
     right = {"class": "cube", "params": {"x": 0.05, "y": 0.0, "s": 0.5, "c": "red"}}
@@ -257,7 +266,7 @@ def test_recovery_leaves_out_extra_objects_no_camera_sees():
 
 
 def test_pixels_seen_is_zero_out_of_view_and_behind_another(root, require_gl):
-    from sppl.experiment import load_objects, pixels_seen
+    from sppl.runs.experiment import load_objects, pixels_seen
 
     obs = root / "examples" / "three_shapes" / "obs"
     scene = load_objects(obs / "scene.json")

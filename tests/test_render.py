@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from sppl.camera import Camera, look_at
+from sppl.data.camera import Camera, look_at
 from sppl.errors import RenderError
-from sppl.geometry import PRIMITIVES, Part, rotation, scaling, translation
-from sppl.model import RenderSettings
-from sppl.render import Renderer, gl_context, raycast
+from sppl.model.geometry import PRIMITIVES, Part, rotation, scaling, translation
+from sppl.model.types import RenderSettings
+from sppl.render import Renderer, raycast
 from sppl.render import context as context_module
 
 SETTINGS = RenderSettings(background=(0.1, 0.2, 0.3), ambient=0.35, light=(0.4, -0.3, 1.0))
@@ -25,13 +25,7 @@ RED = (0.9, 0.1, 0.1)
 
 
 @pytest.fixture(scope="module")
-def gl_renderer():
-    try:
-        gl_context()
-    except RenderError as error:
-        if os.environ.get("CI") == "true":
-            pytest.fail(f"CI must be able to render: {error}")
-        pytest.skip(f"no headless OpenGL context on this machine: {error}")
+def gl_renderer(require_gl):
     renderer = Renderer(SETTINGS)
     yield renderer
     renderer.release()
