@@ -46,12 +46,27 @@ from .model import (
 from .model.likelihoods import Gaussian, Likelihood, available_likelihoods, register_likelihood
 from .model.region import RegionError, bind_region
 from .model.robust import Mixture, StudentT
-from .model.simulate import render_observations, sample_noise, sample_objects
+from .model.simulate import (
+                    load_scene,
+                    objects_from_dict,
+                    render_observations,
+                    sample_noise,
+                    sample_objects,
+)
 from .model.types import Model
 from .output.compare import compare_scenes
 from .output.posterior import load_run, open_posterior, write_posterior
+from .output.report import (
+                    CHAIN_COLOURS,
+                    camera_figures,
+                    evenly,
+                    plot_occupancy,
+                    pooled_samples,
+                    write_report,
+)
 from .render import Renderer, raycast
 from .render.seen import SeenPass, seen_reference
+from .runs import experiment
 from .runs.chains import run_chains
 from .runs.dataset import find_scenes, run_dataset
 from .runs.executors import LocalExecutor, RayExecutor
@@ -61,6 +76,7 @@ from .verify import check_proposals, joint_check, verify_model
 
 __all__ = [
     "Beta",
+    "CHAIN_COLOURS",
     "Categorical",
     "DiscreteUniform",
     "Exponential",
@@ -104,17 +120,24 @@ __all__ = [
     "Uniform",
     "available_likelihoods",
     "bind_region",
+    "camera_figures",
     "check_proposals",
     "compare_scenes",
     "compile_model",
+    "evenly",
+    "experiment",
     "find_scenes",
     "joint_check",
     "load_cameras",
     "load_model",
     "load_observations",
     "load_run",
+    "load_scene",
+    "objects_from_dict",
     "open_posterior",
     "parse",
+    "plot_occupancy",
+    "pooled_samples",
     "raycast",
     "register_likelihood",
     "render_observations",
@@ -131,4 +154,5 @@ __all__ = [
     "verify_model",
     "write_observations",
     "write_posterior",
+    "write_report",
 ]

@@ -108,3 +108,15 @@ def test_no_module_imports_one_that_imports_it_back():
         if m not in state:
             visit(m, [m])
     assert not cycles, "\n".join(cycles)
+
+
+def test_examples_use_only_the_public_api():
+    """The examples are written as a user would: ``sppl``'s exports, and the command line."""
+    wrong = []
+    for path in sorted((PACKAGE.parent / "examples").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = ([node.module] if isinstance(node, ast.ImportFrom) and node.module
+                     else [a.name for a in node.names] if isinstance(node, ast.Import) else [])
+            wrong += [f"{path.relative_to(PACKAGE.parent)}: {n}" for n in names
+                      if n.startswith("sppl.") and n != "sppl.cli"]
+    assert not wrong, "\n".join(wrong)

@@ -23,8 +23,8 @@ import json
 import sys
 from pathlib import Path
 
-from sppl.output.report import camera_figures
-from sppl.runs import experiment
+import sppl
+from sppl import experiment
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
@@ -98,10 +98,9 @@ def posterior_recovery(run: Path, truth, draws: int = 400) -> float:
     """The share of the run's samples after burn-in (pooled chains, ``draws`` evenly spaced)
     in which every true object has an estimated one of its class and colour within 0.15 m:
     how much of the posterior, not just its MAP, has the scene right."""
-    from sppl.output.posterior import load_run
-    from sppl.output.report import _all_samples, _even
+    from sppl import evenly, load_run, pooled_samples
 
-    samples = _even(_all_samples(load_run(run)), draws)
+    samples = evenly(pooled_samples(load_run(run)), draws)
     found = [experiment.recovery(s["objects"], truth).found == len(truth) for s in samples]
     return sum(found) / len(found) if found else 0.0
 
@@ -109,10 +108,7 @@ def posterior_recovery(run: Path, truth, draws: int = 400) -> float:
 def figures(model_path, runs, truth, images: Path, obs) -> None:
     from matplotlib.figure import Figure
 
-    from sppl.data.observations import load_observations
-    from sppl.lang import load_model
-    from sppl.output.posterior import load_run
-    from sppl.output.report import _all_samples, _even, plot_occupancy
+    from sppl import evenly, load_model, load_observations, load_run, plot_occupancy, pooled_samples
 
     images.mkdir(parents=True, exist_ok=True)
     model = load_model(model_path)
@@ -123,7 +119,7 @@ def figures(model_path, runs, truth, images: Path, obs) -> None:
     for ax, (label, run, _) in zip(axes, runs):
         r = load_run(run)
         used = {c.name for c in load_observations(Path(r.meta["observations"])).cameras}
-        im = plot_occupancy(ax, model, _even(_all_samples(r), 300), r.summary["map"]["objects"],
+        im = plot_occupancy(ax, model, evenly(pooled_samples(r), 300), r.summary["map"]["objects"],
                             truth, [c for c in cameras if c.name in used], extent=extent)
         ax.set_title(label)
     fig.colorbar(im, ax=axes, label="P(covered)", shrink=0.8)
@@ -133,7 +129,7 @@ def figures(model_path, runs, truth, images: Path, obs) -> None:
     r = load_run(run)
     tmp = run / "figures"
     tmp.mkdir(exist_ok=True)
-    views = camera_figures(model, load_observations(sub), r.summary["map"]["objects"], tmp)
+    views = sppl.camera_figures(model, load_observations(sub), r.summary["map"]["objects"], tmp)
     from PIL import Image
 
     tiles = [Image.open(tmp / v.file).convert("RGB") for v in views]

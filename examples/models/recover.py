@@ -34,8 +34,8 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
 sys.path.insert(0, str(ROOT))
 
+from sppl import compare_scenes  # noqa: E402
 from sppl.cli import main as sppl  # noqa: E402
-from sppl.output.compare import compare_scenes  # noqa: E402
 
 MODELS = ("shapes", "blocks", "tabletop", "shapes_plus")
 # How far (metres, on the ground plane) a MAP object may be from the true one: a tenth of the
@@ -91,12 +91,7 @@ def truth_log_joint(scn: Path, obs: Path) -> float:
     another scene (the model's)."""
     import numpy as np
 
-    from sppl.data.observations import load_observations
-    from sppl.infer.chain import Sampler
-    from sppl.lang import load_model
-    from sppl.model.simulate import load_scene
-    from sppl.render import Renderer
-    from sppl.scoring.scorer import Scorer
+    from sppl import Renderer, Sampler, Scorer, load_model, load_observations, load_scene
 
     model = load_model(scn)
     renderer = Renderer(model.render)

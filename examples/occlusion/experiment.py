@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sppl.runs import experiment
+from sppl import experiment
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
@@ -58,11 +58,14 @@ def main(argv=None) -> int:
     summary = experiment.sample(model_path, obs, run, steps=steps, seed=args.seed,
                                 chains=args.chains)
 
-    from sppl.data.observations import load_observations
-    from sppl.lang import load_model
-    from sppl.model.simulate import sample_objects
-    from sppl.output.posterior import load_run
-    from sppl.output.report import _all_samples, write_report
+    from sppl import (
+        load_model,
+        load_observations,
+        load_run,
+        pooled_samples,
+        sample_objects,
+        write_report,
+    )
 
     page = write_report(run)
     model = load_model(model_path)
@@ -70,7 +73,7 @@ def main(argv=None) -> int:
     front, hidden = truth[0], truth[1]
     shadow = Shadow(camera.position[:2], front, hidden, camera.depth_max)
 
-    samples = _all_samples(load_run(run))
+    samples = pooled_samples(load_run(run))
     behind = [shadow.objects_in(s["objects"]) for s in samples]
     rng = np.random.default_rng(0)
     prior = [shadow.objects_in([o.as_dict() for o in sample_objects(model, rng)])
@@ -144,11 +147,11 @@ class Shadow:
 def occupancy_figure(model, samples, map_objects, truth, cameras, shadow, path) -> None:
     from matplotlib.figure import Figure
 
-    from sppl.output.report import _even, plot_occupancy
+    from sppl import evenly, plot_occupancy
 
     fig = Figure(figsize=(7.0, 4.8), layout="constrained")
     ax = fig.subplots()
-    im = plot_occupancy(ax, model, _even(samples, 400), map_objects, truth, cameras,
+    im = plot_occupancy(ax, model, evenly(samples, 400), map_objects, truth, cameras,
                         extent=(-4.5, 4.0, -3.0, 3.0))
     # The shadow wedge the table counts in.
     for sign in (-1, 1):

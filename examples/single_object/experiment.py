@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sppl.runs import experiment
+from sppl import experiment
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
@@ -57,9 +57,7 @@ def main(argv=None) -> int:
     summary = experiment.sample(model_path, obs, run, steps=steps, seed=args.seed,
                                 chains=args.chains)
 
-    from sppl.data.observations import load_observations
-    from sppl.output.posterior import load_run
-    from sppl.output.report import write_report
+    from sppl import load_observations, load_run, write_report
 
     page = write_report(run)
     camera = load_observations(obs).cameras[0]
@@ -181,7 +179,7 @@ def fmt(params) -> str:
 def ambiguity_figure(path, chains, d_true, true_obj) -> None:
     from matplotlib.figure import Figure
 
-    from sppl.output.report import CHAIN_COLOURS
+    from sppl import CHAIN_COLOURS
 
     fig = Figure(figsize=(9.5, 3.8), layout="constrained")
     ax0, ax1 = fig.subplots(1, 2)

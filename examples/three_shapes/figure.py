@@ -15,10 +15,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
-from sppl.data.observations import load_observations
-from sppl.lang import load_model
-from sppl.model.simulate import objects_from_dict
-from sppl.render import Renderer
+from sppl import Renderer, load_model, load_observations, objects_from_dict
 
 SCALE = 3  # pixels of the figure per pixel of the image
 

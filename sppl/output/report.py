@@ -81,11 +81,13 @@ def _resolve(given: Path | None, recorded: str | None, what: str, option: str, r
     return path
 
 
-def _all_samples(run: RunFiles) -> list[dict[str, Any]]:
+def pooled_samples(run: RunFiles) -> list[dict[str, Any]]:
+    """Every chain's samples after burn-in, pooled in chain order."""
     return [s for chain in kept_samples(run) for s in chain]
 
 
-def _even(items: Sequence, n: int) -> list:
+def evenly(items: Sequence, n: int) -> list:
+    """At most ``n`` of ``items``, evenly spaced, the first and last among them."""
     if len(items) <= n:
         return list(items)
     return [items[i] for i in np.linspace(0, len(items) - 1, n).round().astype(int)]
@@ -173,7 +175,7 @@ def predictive_figures(model, obs, samples, folder: Path,
     from ..model.simulate import objects_from_dict, render_observations
     from ..render import Renderer
 
-    chosen = _even(samples, draws)
+    chosen = evenly(samples, draws)
     specs = [CameraSpec(f.camera, f.modalities) for f in obs.frames]
     rng = np.random.default_rng(seed)
     renderer = Renderer(model.render)
@@ -337,7 +339,7 @@ def plot_occupancy(ax, model, samples, map_objects, truth, cameras, extent=None)
 def occupancy_figure(model, samples, map_objects, truth, cameras, folder: Path) -> Figure:
     fig = _figure(6.0, 5.2)
     ax = fig.subplots()
-    draws = _even(samples, OCCUPANCY_DRAWS)
+    draws = evenly(samples, OCCUPANCY_DRAWS)
     im = plot_occupancy(ax, model, draws, map_objects, truth, cameras)
     fig.colorbar(im, ax=ax, label="P(covered)", shrink=0.85)
     return Figure(
@@ -380,7 +382,7 @@ def match_to_map(model, map_objects, samples, radius: float = MATCH_RADIUS):
 def marginal_figures(model, map_objects, samples, truth, folder: Path) -> list[Figure]:
     from matplotlib.ticker import MaxNLocator
 
-    draws = _even(samples, MARGINAL_DRAWS)
+    draws = evenly(samples, MARGINAL_DRAWS)
     matches = match_to_map(model, map_objects, draws)
     true_of = {}
     if truth:
@@ -801,13 +803,13 @@ def write_report(
     map_objects = (summary.get("map") or {}).get("objects", [])
     post = posterior_arrays(run)
     diag = diagnostics(post)
-    samples = _all_samples(run)
+    samples = pooled_samples(run)
     sections: list[str] = []
 
     from .report_view import GHOST_DRAWS, view_data, view_html
 
     extent = _extent(model, list(map_objects) + list(true_objects or []), obs.cameras)
-    view = view_data(model, run, map_objects, true_objects, _even(samples, GHOST_DRAWS),
+    view = view_data(model, run, map_objects, true_objects, evenly(samples, GHOST_DRAWS),
                      obs.cameras, extent)
     sections.append("<h2>The scene in 3D: the MAP and posterior samples</h2>"
                     + _explain("view") + view_html(view, folder))
