@@ -686,7 +686,7 @@ def test_a_third_party_likelihood_registered_by_entry_point(tmp_path, monkeypatc
     info = tmp_path / "laplace_plugin-1.0.dist-info"
     info.mkdir()
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: laplace-plugin\nVersion: 1.0\n")
-    (info / "entry_points.txt").write_text("[sppl.model.likelihoods]\nlaplace = laplace_plugin:Laplace\n")
+    (info / "entry_points.txt").write_text("[sppl.likelihoods]\nlaplace = laplace_plugin:Laplace\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.setattr(likelihoods, "_registry", dict(likelihoods._BUILTIN))
     monkeypatch.setattr(likelihoods, "_plugins_loaded", False)

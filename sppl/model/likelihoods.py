@@ -8,7 +8,7 @@ values and the sum of squared residuals, which is all the noise scale ever needs
 Likelihoods are looked up by the name a model file gives (``likelihood gaussian``). The robust
 ones, ``mixture`` and ``student_t`` (``sppl.model.robust``), have no sufficient statistics: theirs
 are scored at given noise values. Third-party
-packages add their own through the ``sppl.model.likelihoods`` entry-point group: the entry point's
+packages add their own through the ``sppl.likelihoods`` entry-point group: the entry point's
 name is the name used in model files, and it points at a class implementing ``Likelihood``.
 """
 
@@ -148,7 +148,7 @@ _plugins_loaded = False
 
 def register_likelihood(name: str, factory: Callable[..., Likelihood]) -> None:
     """Make a likelihood usable by name in model files (for code that is not an installed
-    package; installed packages use the ``sppl.model.likelihoods`` entry-point group instead)."""
+    package; installed packages use the ``sppl.likelihoods`` entry-point group instead)."""
     _registry[name] = factory
 
 
@@ -157,7 +157,7 @@ def _load_plugins() -> None:
     if _plugins_loaded:
         return
     _plugins_loaded = True
-    for ep in entry_points(group="sppl.model.likelihoods"):
+    for ep in entry_points(group="sppl.likelihoods"):
         if ep.name in _registry:
             continue
         try:
