@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import numpy as np
 
 from ..model.geometry import MESH_PREFIX, ROUND_SECTIONS, Part, load_mesh, rotation_z
+from ..model.primitives import get_primitive, primitive_names
 from ..model.types import Values
 from . import ast
 from .expressions import (
@@ -27,33 +28,31 @@ from .expressions import (
     known,
 )
 
-# Each primitive's arguments, and the unit shapes it is made of with the matrix that scales
-# each (see sppl/model/geometry.py for the unit shapes).
-_PRIMITIVES: dict[str, tuple[str, ...]] = {
-    "box": ("width", "depth", "height"),
-    "cylinder": ("radius", "height"),
-    "cone": ("radius", "height"),
-    "sphere": ("radius",),
-    "capsule": ("radius", "length"),
-    "mesh": ("file",),
-}
+
+class _Arguments(Mapping):
+    """Each shape a geometry line can name, with its arguments: the registered primitives
+    (``sppl.model.primitives``), read when a model is compiled so that a shape registered
+    after import is known, and ``mesh("file")``."""
+
+    def _all(self) -> dict[str, tuple[str, ...]]:
+        return {**{n: get_primitive(n).arguments for n in primitive_names()}, "mesh": ("file",)}
+
+    def __getitem__(self, name: str) -> tuple[str, ...]:
+        return self._all()[name]
+
+    def __iter__(self):
+        return iter(self._all())
+
+    def __len__(self) -> int:
+        return len(self._all())
+
+
+_PRIMITIVES = _Arguments()
 
 
 def _pieces(primitive: str, s: list[float]) -> list[tuple[str, np.ndarray]]:
-    if primitive == "box":
-        return [("box", np.diag([s[0], s[1], s[2], 1.0]))]
-    if primitive in ("cylinder", "cone"):
-        return [(primitive, np.diag([s[0], s[0], s[1], 1.0]))]
-    if primitive == "sphere":
-        return [("sphere", np.diag([s[0], s[0], s[0], 1.0]))]
-    # A capsule: a cylinder of the given length between two half-buried spheres, resting on
-    # the ground like the other shapes (total height length + 2 radius).
-    r, length = s
-    body = np.diag([r, r, length, 1.0])
-    body[2, 3] = r
-    top = np.diag([r, r, r, 1.0])
-    top[2, 3] = length
-    return [("cylinder", body), ("sphere", np.diag([r, r, r, 1.0])), ("sphere", top)]
+    """The base shapes a primitive is made of at these argument values, with their matrices."""
+    return get_primitive(primitive).parts(s)
 
 
 _FOOTPRINTS = {"rectangle": ("width", "depth"), "circle": ("radius",)}

@@ -5,17 +5,13 @@ axis is the z axis. A part poses one unit shape with a 4x4 world-from-unit matri
 the scale, so a class's geometry is a few multiplications per object and the renderer uploads
 each unit mesh once.
 
-Unit shapes (before the part's matrix):
-- ``box``: x and y in [-1/2, 1/2], z in [0, 1] (scale by width, depth, height);
-- ``cylinder``: radius 1, z in [0, 1] (scale by radius, radius, height);
-- ``cone``: base radius 1 at z = 0, apex at z = 1 (scale by radius, radius, height);
-- ``sphere``: radius 1 centred at z = 1 (scale by the radius: it then rests on the ground);
-- ``mesh:<absolute path>``: a mesh loaded from a file (OBJ, PLY, STL, GLB, ...), in its own
-  coordinates, which the model file's scale and pose then act on (``load_mesh``).
+The shapes are registered in ``sppl.model.primitives``, one module each, which says their unit
+shapes; ``mesh:<absolute path>`` is a mesh loaded from a file (OBJ, PLY, STL, GLB, ...), in its
+own coordinates, which the model file's scale and pose then act on (``load_mesh``).
 
-The round shapes' meshes (48-sided prisms and pyramids, an icosphere) give only their bounds
-and footprints: the renderers intersect each pixel's ray with the exact shape
-(``sppl.render.renderer.RAY_CAST``).
+A ray-cast shape's mesh (the round shapes': 48-sided prisms and pyramids, an icosphere) gives
+only its bounds and the report's 3D view: the renderers intersect each pixel's ray with the
+exact shape.
 """
 
 from __future__ import annotations
@@ -28,13 +24,9 @@ import numpy as np
 import shapely
 import trimesh
 
-PRIMITIVES = ("box", "cylinder", "cone", "sphere")
-# A part whose primitive is MESH_PREFIX + an absolute path draws the mesh in that file.
-MESH_PREFIX = "mesh:"
+from .primitives import MESH_PREFIX, PRIMITIVES, ROUND_SECTIONS, get_primitive
 
-# Round shapes are footprinted as polygons with this many sides: enough that the polygon
-# differs from the circle by under 0.2% of the radius.
-ROUND_SECTIONS = 48
+__all__ = ["MESH_PREFIX", "PRIMITIVES", "ROUND_SECTIONS"]  # re-exported for their users
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,23 +78,14 @@ def scaling(sx: float, sy: float, sz: float) -> np.ndarray:
 
 @cache
 def unit_mesh(primitive: str) -> trimesh.Trimesh:
-    """The unit shape of a primitive, as a trimesh (cached: built once per process)."""
-    if primitive == "box":
-        mesh = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
-        mesh.apply_translation((0.0, 0.0, 0.5))
-    elif primitive == "cylinder":
-        mesh = trimesh.creation.cylinder(radius=1.0, height=1.0, sections=ROUND_SECTIONS)
-        mesh.apply_translation((0.0, 0.0, 0.5))
-    elif primitive == "cone":
-        mesh = trimesh.creation.cone(radius=1.0, height=1.0, sections=ROUND_SECTIONS)
-    elif primitive == "sphere":
-        mesh = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
-        mesh.apply_translation((0.0, 0.0, 1.0))
-    elif primitive.startswith(MESH_PREFIX):
-        mesh = load_mesh(primitive[len(MESH_PREFIX) :])
-    else:
-        raise KeyError(f"unknown primitive {primitive!r}; expected one of {', '.join(PRIMITIVES)}")
-    return mesh
+    """The unit shape of a base shape or mesh file, as a trimesh (cached: built once per
+    process); KeyError for a name that is neither."""
+    if primitive.startswith(MESH_PREFIX):
+        return load_mesh(primitive[len(MESH_PREFIX) :])
+    shape = get_primitive(primitive)
+    if shape.mesh is None:
+        raise KeyError(f"{primitive!r} is made of other shapes and has no unit mesh")
+    return shape.mesh()
 
 
 def load_mesh(path: str) -> trimesh.Trimesh:
@@ -121,28 +104,19 @@ def load_mesh(path: str) -> trimesh.Trimesh:
 
 @cache
 def _outline(primitive: str) -> np.ndarray:
-    """Points of the unit shape whose convex hull, seen from above, is its footprint.
-
-    Exact for the box; for round shapes, the inscribed regular polygon at their widest height;
-    for a mesh, the vertices of its convex hull.
-    Kept in homogeneous coordinates so a part's matrix poses them directly.
-    """
-    if primitive.startswith(MESH_PREFIX):
-        mesh = unit_mesh(primitive)
-        try:
-            vertices = mesh.convex_hull.vertices
-        except Exception:  # a flat or degenerate mesh has no hull volume
-            vertices = mesh.vertices
-        return np.column_stack([vertices, np.ones(len(vertices))])
-    if primitive == "box":
-        xy = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
-        zs = (0.0, 1.0)
-    else:
-        t = np.linspace(0.0, 2.0 * math.pi, ROUND_SECTIONS, endpoint=False)
-        xy = np.stack([np.cos(t), np.sin(t)], axis=1)
-        zs = {"cylinder": (0.0, 1.0), "cone": (0.0,), "sphere": (1.0,)}[primitive]
-    pts = [np.column_stack([xy, np.full(len(xy), z), np.ones(len(xy))]) for z in zs]
-    return np.concatenate(pts)
+    """Points of the unit shape whose convex hull, seen from above, is its footprint: the
+    shape's own ``outline`` (exact for the box; for round shapes, the inscribed regular
+    polygon at their widest height), else the vertices of its mesh's convex hull. Kept in
+    homogeneous coordinates so a part's matrix poses them directly."""
+    shape = None if primitive.startswith(MESH_PREFIX) else get_primitive(primitive)
+    if shape is not None and shape.outline is not None:
+        return shape.outline()
+    mesh = unit_mesh(primitive)
+    try:
+        vertices = mesh.convex_hull.vertices
+    except Exception:  # a flat or degenerate mesh has no hull volume
+        vertices = mesh.vertices
+    return np.column_stack([vertices, np.ones(len(vertices))])
 
 
 def ground_points(parts: tuple[Part, ...] | list[Part]) -> np.ndarray:

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..data.camera import Camera
 from ..errors import RenderError
-from ..model.geometry import MESH_PREFIX, PRIMITIVES, Part, unit_mesh
+from ..model.geometry import MESH_PREFIX, Part, unit_mesh
 
 # Rows and columns as half-open ranges: (row0, row1, col0, col1).
 Rect = tuple[int, int, int, int]
@@ -27,10 +27,8 @@ def unit_corners(primitive: str) -> np.ndarray:
     """The 8 corners (4, 8) of a unit mesh's bounding box, homogeneous, as columns."""
     try:
         lo, hi = unit_mesh(primitive).bounds
-    except KeyError:
-        raise RenderError(
-            f"unknown primitive {primitive!r}; expected one of {', '.join(PRIMITIVES)}"
-        ) from None
+    except KeyError as error:
+        raise RenderError(error.args[0]) from None
     except ValueError as error:
         raise RenderError(f"cannot load the mesh {primitive[len(MESH_PREFIX):]}: {error}")
     corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])

@@ -18,23 +18,24 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..errors import RenderError
-from ..model.geometry import Part, linear_inverse
+from ..model.geometry import MESH_PREFIX, Part, linear_inverse
+from ..model.primitives import find_primitive
 from ..model.types import RenderSettings
 
 MAX_CASTERS = 252  # lighting.glsl's: the block then fits GL's guaranteed 16 KiB
-CASTER_KINDS = {"box": 0.0, "sphere": 1.0, "cylinder": 2.0, "cone": 3.0}
 HEADER_BYTES = 3 * 16
 CASTER_BYTES = 4 * 16
 BLOCK_BYTES = HEADER_BYTES + MAX_CASTERS * CASTER_BYTES
 
 
 def caster_rows(parts: Sequence[Part]) -> bytes:
-    """The block's rows of the parts that cast shadows: every built-in primitive with a
-    volume. Mesh files are not tested against (a mesh may have any number of triangles):
-    they receive shadows but cast none, in both renderers."""
+    """The block's rows of the parts that cast shadows: every part with a volume whose shape
+    lighting.glsl tests shadow rays against (``Primitive.caster``: the built-in shapes). Mesh
+    files are not tested against (a mesh may have any number of triangles), nor are shapes
+    registered without a caster code: they receive shadows but cast none, in both renderers."""
     floats: list[float] = []
     for part in parts:
-        kind = CASTER_KINDS.get(part.primitive)
+        kind = caster_kind(part.primitive)
         if kind is None:
             continue
         matrix = np.asarray(part.matrix, dtype=float)
@@ -44,6 +45,12 @@ def caster_rows(parts: Sequence[Part]) -> bytes:
         floats += inverse[:3].ravel().tolist()
         floats += (kind, 0.0, 0.0, 0.0)
     return struct.pack(f"{len(floats)}f", *floats)
+
+
+def caster_kind(primitive: str) -> float | None:
+    """lighting.glsl's code for a primitive's shape, or None if it casts no shadow."""
+    shape = None if primitive.startswith(MESH_PREFIX) else find_primitive(primitive)
+    return None if shape is None or shape.caster is None else float(shape.caster)
 
 
 def block(settings: RenderSettings, casters: bytes = b"") -> bytes:

@@ -44,11 +44,11 @@ from .lighting import BLOCK_BYTES, block
 from .renderer import (
     FLIP_Y,
     LIGHTING_BINDING,
-    RAY_CAST,
     VERTEX_FORMAT,
     _column_major,
     flat_vertices,
     program,
+    ray_cast,
     shape,
 )
 
@@ -346,7 +346,7 @@ class PixelScorer:
             buffer = slot.buffers[primitive] = self.ctx.buffer(reserve=max(nbytes, 1024),
                                                                dynamic=True)
             slot.vaos[primitive] = self.ctx.vertex_array(self._program(c, shape(primitive)), [
-                (self._mesh(primitive), *VERTEX_FORMAT[primitive in RAY_CAST]),
+                (self._mesh(primitive), *VERTEX_FORMAT[ray_cast(primitive)]),
                 (buffer, INSTANCE_FORMAT, "i_model", "i_normal", "i_colour"),
             ])
         elif buffer.size < nbytes:

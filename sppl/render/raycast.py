@@ -2,9 +2,9 @@
 
 It shares only the unit meshes and the camera with the OpenGL renderer, and derives everything
 else independently (normals from the posed triangles' edges, depth from the hit distance), so
-that it can serve as the oracle the fast path is tested against. Spheres, cylinders and cones,
-which the renderer ray-casts exactly, are intersected exactly here too, in double precision
-(``_round_hits``), from a formulation of their own.
+that it can serve as the oracle the fast path is tested against. Shapes that the renderer
+ray-casts exactly (spheres, cylinders, cones) are intersected exactly here too, in double
+precision, by their numpy twin (``Primitive.hits``), a formulation of their own.
 Meant for tiny images.
 """
 
@@ -15,13 +15,19 @@ from collections.abc import Iterable
 import numpy as np
 
 from ..data.camera import Camera
-from ..model.geometry import Part, unit_mesh
+from ..model.geometry import MESH_PREFIX, Part, unit_mesh
+from ..model.primitives import find_primitive
 from ..model.types import RenderSettings
+from .lighting import caster_kind
 
 # Rays per batch: bounds the (rays x triangles) temporaries to a few tens of megabytes.
 BATCH = 256
-# Primitives intersected exactly, as the GL renderer ray-casts them.
-ROUND = ("sphere", "cylinder", "cone")
+
+
+def _exact(primitive: str):
+    """The shape's numpy ray intersection, for a shape the GL renderer ray-casts; else None."""
+    shape = None if primitive.startswith(MESH_PREFIX) else find_primitive(primitive)
+    return shape.hits if shape is not None and shape.ray_cast else None
 
 
 def raycast(
@@ -44,7 +50,7 @@ def raycast(
     colour = np.zeros((h * w, 3))  # the unlit colour of the part each ray hits
     normal = np.zeros((h * w, 3))  # its outward unit normal there
     for part in parts:
-        if part.primitive in ROUND:
+        if _exact(part.primitive):
             # The GL renderer clips at its near plane, a plane of constant z: a ray's hits
             # count from the z-depth ``near`` on.
             t, normals = _round_hits(part, origin, directions, camera.near / (directions @ forward))
@@ -92,17 +98,19 @@ SHADOW_BIAS = 1e-3
 def _shadowed(parts, points: np.ndarray, light: np.ndarray) -> np.ndarray:
     """Whether each point's ray towards the light crosses a part's surface beyond
     SHADOW_BIAS. Parts are closed, so such a crossing is where the ray enters or leaves a
-    solid; a point on its own part, lit from outside, leaves it at once. Mesh files cast no
-    shadow (as in the GL renderers, which test only built-in solids)."""
+    solid; a point on its own part, lit from outside, leaves it at once. Only shapes with a
+    caster code cast shadows (as in the GL renderers, which test only those solids)."""
     blocked = np.zeros(len(points), dtype=bool)
     directions = np.tile(light, (len(points), 1))
     bias = np.full(len(points), SHADOW_BIAS)
     for part in parts:
-        if part.primitive in ROUND:
+        if caster_kind(part.primitive) is None:
+            continue
+        if _exact(part.primitive):
             t, _ = _round_hits(part, points, directions, bias)
             if t is not None:
                 blocked |= np.isfinite(t)
-        elif part.primitive == "box":
+        else:
             triangles, _ = _posed_triangles(part)
             for start in range(0, len(points), BATCH):
                 rays = slice(start, start + BATCH)
@@ -131,11 +139,9 @@ def _hits_from(origins: np.ndarray, direction: np.ndarray, triangles: np.ndarray
 
 
 def _round_hits(part: Part, origin, directions, start):
-    """The distance along each unit ray to the part's round shape (inf for a miss), counting
-    only hits at least ``start`` (per ray) along it, and the outward unit normals (N, 3) there;
-    (None, None) for a part with no volume. The unit shapes: a sphere of radius 1 centred at
-    (0, 0, 1); a cylinder of radius 1 about the z axis for z in [0, 1], with its caps; a cone
-    of base radius 1 at z = 0 and apex (0, 0, 1), with its base. ``origin`` is one point, or
+    """The distance along each unit ray to the part's exactly intersected shape (inf for a
+    miss), counting only hits at least ``start`` (per ray) along it, and the outward unit
+    normals (N, 3) there; (None, None) for a part with no volume. ``origin`` is one point, or
     one per ray (N, 3)."""
     matrix = np.asarray(part.matrix, dtype=float)
     linear = matrix[:3, :3]
@@ -144,37 +150,8 @@ def _round_hits(part: Part, origin, directions, start):
     unit_from_world = np.linalg.inv(linear)
     o = (origin - matrix[:3, 3]) @ unit_from_world.T  # the ray's origin in unit coordinates
     d = directions @ unit_from_world.T
-    candidates = []  # (t, the unit shape's normal there), t NaN where there is no such hit
-    if part.primitive == "sphere":
-        # |o + t d - (0, 0, 1)|^2 = 1
-        centred = np.broadcast_to(o - (0.0, 0.0, 1.0), d.shape)
-        for t in _roots(np.einsum("nk,nk->n", d, d), np.einsum("nk,nk->n", d, centred),
-                        np.einsum("nk,nk->n", centred, centred) - 1.0):
-            candidates.append((t, centred + t[:, None] * d))
-    else:
-        x, y, z = o.T
-        dx, dy, dz = d.T
-        if part.primitive == "cylinder":
-            # x^2 + y^2 = 1 for z in [0, 1], then the planes z = 0 and z = 1 inside radius 1.
-            side = _roots(dx * dx + dy * dy, x * dx + y * dy, x * x + y * y - 1.0)
-            caps = ((0.0, -1.0), (1.0, 1.0))
-        else:
-            # x^2 + y^2 = (1 - z)^2 for z in [0, 1] (the lower nappe), then the base.
-            w = 1.0 - z
-            side = _roots(dx * dx + dy * dy - dz * dz, x * dx + y * dy + w * dz,
-                          x * x + y * y - w * w)
-            caps = ((0.0, -1.0),)
-        for t in side:
-            point = o + t[:, None] * d
-            t = np.where((point[:, 2] >= 0.0) & (point[:, 2] <= 1.0), t, np.nan)
-            rise = np.zeros(len(d)) if part.primitive == "cylinder" else 1.0 - point[:, 2]
-            candidates.append((t, np.column_stack([point[:, 0], point[:, 1], rise])))
-        for height, facing in caps:
-            with np.errstate(divide="ignore", invalid="ignore"):
-                t = (height - z) / dz
-            point = o + np.nan_to_num(t, posinf=0.0, neginf=0.0)[:, None] * d
-            t = np.where(point[:, 0] ** 2 + point[:, 1] ** 2 <= 1.0, t, np.nan)
-            candidates.append((t, np.tile((0.0, 0.0, facing), (len(d), 1))))
+    o = np.ascontiguousarray(np.broadcast_to(o, d.shape))
+    candidates = _exact(part.primitive)(o, d)  # (t, the unit shape's normal there), t NaN: none
     times = np.stack([t for t, _ in candidates], axis=1)
     times = np.where(np.isfinite(times) & (times > start[:, None]), times, np.inf)
     nearest = np.argmin(times, axis=1)
@@ -187,16 +164,6 @@ def _round_hits(part: Part, origin, directions, start):
     normals = unit_normals @ unit_from_world  # the inverse-transpose applied to each normal
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     return t, normals
-
-
-def _roots(a, b, c):
-    """Both roots of a t^2 + 2 b t + c = 0 per ray (NaN where there are none); where a = 0,
-    the one root of the linear equation, twice."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        root = np.sqrt(b * b - a * c)
-        linear = np.where(a == 0.0, -c / (2.0 * b), np.nan)
-        return (np.where(a != 0.0, (-b - root) / a, linear),
-                np.where(a != 0.0, (-b + root) / a, linear))
 
 
 def _posed_triangles(part: Part) -> tuple[np.ndarray, np.ndarray]:

@@ -4,7 +4,7 @@ Each primitive's unit mesh lives on the GPU once; a part is drawn as that mesh u
 matrix and colour, so a new hypothesis costs a few uniform writes, not a mesh upload. Images come
 back as float32 arrays in the camera's conventions (see ``sppl.data.camera``).
 
-Round shapes are the exception (``RAY_CAST``): a tessellated sphere needs a thousand triangles
+Round shapes are the exception (``ray_cast``): a tessellated sphere needs a thousand triangles
 to look round, and on a software rasteriser the setup of a cone's or a cylinder's hundred or two
 costs more than their pixels. Each is drawn as a convex solid around it turned inside out
 (``_proxy``), and the fragment shader intersects each pixel's ray with the exact (affinely
@@ -23,7 +23,8 @@ import trimesh
 
 from ..data.camera import Camera
 from ..errors import RenderError
-from ..model.geometry import MESH_PREFIX, PRIMITIVES, Part, linear_inverse, unit_mesh
+from ..model.geometry import MESH_PREFIX, Part, linear_inverse, unit_mesh
+from ..model.primitives import find_primitive, get_primitive
 from ..model.types import RenderSettings
 from .bounds import closed, contains
 from .context import claim_state, gl_context
@@ -38,8 +39,11 @@ FLIP_Y = np.diag([1.0, -1.0, 1.0, 1.0])
 LIGHTING_BINDING = 0
 
 
-# Primitives whose surface the fragment shader ray-casts exactly over a proxy mesh.
-RAY_CAST = frozenset({"sphere", "cylinder", "cone"})
+def ray_cast(primitive: str) -> bool:
+    """Whether the fragment shader ray-casts this primitive's exact surface over a proxy
+    (its ``Primitive.glsl``), rather than drawing its mesh's triangles."""
+    shape = None if primitive.startswith(MESH_PREFIX) else find_primitive(primitive)
+    return shape is not None and shape.ray_cast
 
 
 # The vertex rows' layout as each program reads it: a proxy's normals are not used.
@@ -47,22 +51,23 @@ VERTEX_FORMAT = {False: ("3f 3f", "in_position", "in_normal"), True: ("3f 3x4", 
 
 
 def shape(primitive: str) -> str | None:
-    """The round shape a primitive's program ray-casts, or None for a rasterised mesh."""
-    return primitive if primitive in RAY_CAST else None
+    """The shape a primitive's program ray-casts, or None for a rasterised mesh."""
+    return primitive if ray_cast(primitive) else None
 
 
 def _shader(name: str, shape: str | None = None, prelude: str = "") -> str:
-    """A shader's source; with a ``shape`` of RAY_CAST, its variant that ray-casts it."""
+    """A shader's source; with a ray-cast ``shape``, its variant that ray-casts it."""
     text = resources.files(__package__).joinpath("shaders", name).read_text(encoding="utf-8")
     if not name.endswith((".frag", ".vert")):
         return text
     # Every fragment shader shades with lighting.glsl's block; a ray-cast one hits its shape
-    # with ray_cast.glsl. The prelude (its defines first) goes above them all.
+    # with ray_cast.glsl's helpers and the shape's own snippet. The prelude (its defines
+    # first) goes above them all.
     version, _, body = text.partition("\n")
     extra = _shader("lighting.glsl") if name.endswith(".frag") else ""
     if shape is not None:
         if name.endswith(".frag"):
-            extra = f"{_shader('ray_cast.glsl')}\n{extra}"
+            extra = f"{_shader('ray_cast.glsl')}\n{get_primitive(shape).glsl}\n{extra}"
         extra = f"#define RAY_CAST\n#define HIT {shape}_hit\n{extra}"
     if prelude:
         extra = f"{prelude}\n{extra}"
@@ -100,22 +105,18 @@ def mesh_vertices(primitive: str) -> np.ndarray:
 def flat_vertices(primitive: str) -> np.ndarray:
     """What the renderers draw for a primitive: its unit mesh's facets, or for a ray-cast
     primitive the proxy that reaches its pixels."""
-    if primitive in RAY_CAST:
+    if ray_cast(primitive):
         return _facets(_proxy(primitive))
     return mesh_vertices(primitive)
 
 
 def _proxy(primitive: str):
-    """A convex solid around the unit shape, turned inside out: its far faces are the front
-    ones, so that back-face culling keeps them, and they cover the shape's pixels even for a
-    camera inside it. The bounding box; for a cone, the square pyramid around it, which seen
-    from the side covers half the box's pixels (each costs a ray test)."""
-    lo, hi = unit_mesh(primitive).bounds
-    if primitive == "cone":
-        corners = [(x, y, lo[2]) for x in (lo[0], hi[0]) for y in (lo[1], hi[1])]
-        solid = trimesh.Trimesh(vertices=[*corners, (0.0, 0.0, hi[2])]).convex_hull
-    else:
-        solid = trimesh.creation.box(bounds=(lo, hi))
+    """A convex solid around the unit shape (the shape's ``proxy``, else its bounding box),
+    turned inside out: its far faces are the front ones, so that back-face culling keeps
+    them, and they cover the shape's pixels even for a camera inside it."""
+    shape = get_primitive(primitive)
+    mesh = unit_mesh(primitive)
+    solid = shape.proxy() if shape.proxy is not None else trimesh.creation.box(bounds=mesh.bounds)
     solid.invert()
     return solid
 
@@ -249,18 +250,16 @@ class Renderer:
 
     def _upload(self, primitive: str) -> moderngl.VertexArray:
         """Upload a primitive's mesh (a mesh file's the first time a part uses it)."""
-        if primitive not in PRIMITIVES and not primitive.startswith(MESH_PREFIX):
-            raise RenderError(
-                f"unknown primitive {primitive!r}; expected one of {', '.join(PRIMITIVES)}"
-            )
         try:
             vertices = flat_vertices(primitive)
+        except KeyError as error:
+            raise RenderError(error.args[0]) from None
         except ValueError as error:
             raise RenderError(f"cannot load the mesh {primitive[len(MESH_PREFIX):]}: {error}")
         buffer = self.ctx.buffer(vertices.tobytes())
         self._buffers[primitive] = buffer
         self._vaos[primitive] = self.ctx.vertex_array(
-            self._program(shape(primitive)), [(buffer, *VERTEX_FORMAT[primitive in RAY_CAST])]
+            self._program(shape(primitive)), [(buffer, *VERTEX_FORMAT[ray_cast(primitive)])]
         )
         return self._vaos[primitive]
 

@@ -1,9 +1,10 @@
-// Round primitives are drawn exactly: a part's unit shape under its affine map is an ellipsoid,
-// or an elliptic cylinder or cone, and each pixel's ray is intersected with it here instead of
-// rasterising a tessellation. The vertex shader draws an inside-out bounding box (its far
-// faces) to reach every pixel the shape may cover and passes, per part, the camera's origin
-// and the camera-to-unit linear map in the unit shape's coordinates. Compiled with HIT
-// defined as one of the *_hit functions.
+// Ray-cast primitives are drawn exactly: each pixel's ray is intersected with the part's unit
+// shape (an ellipsoid, or an elliptic cylinder or cone, once the part's affine map acts on
+// it) instead of rasterising a tessellation. The vertex shader draws an inside-out convex
+// proxy around the shape (its far faces) to reach every pixel the shape may cover and passes,
+// per part, the camera's origin and the camera-to-unit linear map in the unit shape's
+// coordinates. Each ray-cast primitive's own snippet (sppl/model/primitives/NAME.glsl) follows
+// this file and defines NAME_hit; the program is compiled with HIT defined as that function.
 uniform vec4 intrinsics;  // fx, fy, cx, cy in pixels
 uniform float near;
 
@@ -15,29 +16,12 @@ vec3 pixel_ray() {
                 -(gl_FragCoord.y - intrinsics.w) / intrinsics.y, -1.0);
 }
 
-// Each *_hit gives the nearest intersection beyond the near plane, as the ray's parameter t
-// (its z-depth) and the unit shape's outward normal there; false when the ray misses. A camera
-// inside the shape, or one whose near plane cuts it, sees the far side, as it sees a mesh's
-// back faces.
-
-// The unit sphere: radius 1, centre (0, 0, 1).
-bool sphere_hit(vec3 camera, mat3 unit_from_camera, vec3 ray, out float t, out vec3 normal) {
-    vec3 origin = camera - vec3(0.0, 0.0, 1.0);  // relative to the centre
-    vec3 d = unit_from_camera * ray;
-    float a = dot(d, d);
-    // Through the point of the ray closest to the centre, which keeps the discriminant accurate
-    // in single precision far from the sphere.
-    float middle = -dot(origin, d) / a;
-    vec3 closest = origin + middle * d;
-    float discriminant = 1.0 - dot(closest, closest);
-    if (discriminant < 0.0) return false;
-    float half_chord = sqrt(discriminant / a);
-    t = middle - half_chord;
-    if (t <= near) t = middle + half_chord;
-    if (t <= near) return false;
-    normal = origin + t * d;
-    return true;
-}
+// Each NAME_hit(origin, unit_from_camera, ray, out t, out normal) gives the nearest
+// intersection beyond the near plane of the ray origin + t * unit_from_camera * ray (origin:
+// the camera in the unit shape's coordinates; ray: pixel_ray()), as the ray's parameter t
+// (its z-depth) and the unit shape's outward normal there (any length); false when the ray
+// misses. A camera inside the shape, or one whose near plane cuts it, sees the far side, as it
+// sees a mesh's back faces. The helpers below serve quadric shapes.
 
 // Keeps a candidate hit at s along the ray from its point p0 (t = middle + s) if it lies beyond
 // the near plane and before the best so far.
@@ -97,14 +81,6 @@ bool round_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, float slope, out fl
     // The cone's apex has no normal: light it as the tip of the axis.
     if (normal == vec3(0.0)) normal = vec3(0.0, 0.0, 1.0);
     return true;
-}
-
-bool cylinder_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, out float t, out vec3 normal) {
-    return round_hit(origin, unit_from_camera, ray, 0.0, t, normal);
-}
-
-bool cone_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, out float t, out vec3 normal) {
-    return round_hit(origin, unit_from_camera, ray, 1.0, t, normal);
 }
 
 // gl_FragDepth of a camera-space point, as the rasteriser would interpolate it.

@@ -1,0 +1,22 @@
+"""The shapes a geometry line can name, one module each: ``box``, ``cylinder``, ``cone``,
+``sphere`` (base shapes) and ``capsule`` (made of base shapes). ``registry`` says what a
+shape declares; docs/walkthroughs/adding-a-primitive.md adds one."""
+
+from . import box, capsule, cone, cylinder, sphere  # noqa: F401  (each registers its shape)
+from .registry import (
+    MESH_PREFIX,
+    ROUND_SECTIONS,
+    Hits,
+    Primitive,
+    find_primitive,
+    get_primitive,
+    primitive_names,
+    register_primitive,
+    unregister_primitive,
+)
+
+# The built-in base shapes, in a fixed order (tests draw random parts from them).
+PRIMITIVES = ("box", "cylinder", "cone", "sphere")
+
+__all__ = ["MESH_PREFIX", "PRIMITIVES", "ROUND_SECTIONS", "Hits", "Primitive", "find_primitive",
+           "get_primitive", "primitive_names", "register_primitive", "unregister_primitive"]

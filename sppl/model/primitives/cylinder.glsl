@@ -1,0 +1,4 @@
+// The unit cylinder: ray_cast.glsl's round_hit with slope 0.
+bool cylinder_hit(vec3 origin, mat3 unit_from_camera, vec3 ray, out float t, out vec3 normal) {
+    return round_hit(origin, unit_from_camera, ray, 0.0, t, normal);
+}
