@@ -129,7 +129,9 @@ class Classes:
                         f"`count` is already given on line {count.span.line}", item.key.span
                     )
                     continue
-                if key == "max_count" and not self.context.first(("class", pending.name, key), item):
+                if key == "max_count" and not self.context.first(
+                    ("class", pending.name, key), item
+                ):
                     continue
                 n = whole(self.context, item.value, f"`{key}`")
                 if key == "count":
