@@ -1,10 +1,10 @@
 """What the parts of one file's compilation share, handed to each of them explicitly.
 
-A model file is compiled by several parts (``imports.py``, ``shapes.py``, ``scenery.py``,
-``classes.py``, ``sensors.py``, ``settings.py``, ``constraints.py``, ``changes.py``,
-``steps.py``), driven by ``compile.py``. They all report to one list of errors and read one
-table of top-level names, so these, with the classes and sensors whose parameters are still
-being collected, live here.
+A model file is compiled by several parts (``names.py``, ``imports.py``, ``classes.py``,
+``declarations.py``, ``shapes.py``, ``scenery.py``, ``sensors.py``, ``settings.py``,
+``constraints.py``, ``steps.py``, ``changes.py``), driven by ``compile.py``. They all report
+to one list of errors and read one table of top-level names, so these, with the classes and
+sensors whose parameters are still being collected, live here.
 """
 
 from __future__ import annotations

@@ -1,11 +1,10 @@
 """Imports: ``import "file.scn"`` and ``from "file.scn" import a, b``.
 
 A part of the compiler (``sppl.lang.compile``), given the file's ``CompileContext``. An
-imported file is compiled once per compilation, by a compiler of its own that shares the
-``Loader`` (made by the callback the compiler passes in); what it offers (its classes,
-constants, colours and palettes) is a ``Module``. The loader also keeps
-the chain of files being imported, which is how a cycle is found, and the meshes already
-loaded.
+imported file is compiled once per compilation, by a compiler of its own (which the compiler
+passes in as a callback) that shares the ``Loader``; what it offers (its classes, constants,
+colours and palettes) is a ``Module``. The loader also keeps the chain of files being
+imported, which is how a cycle is found, and the meshes already loaded.
 """
 
 from __future__ import annotations
