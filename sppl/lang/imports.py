@@ -1,21 +1,23 @@
 """Imports: ``import "file.scn"`` and ``from "file.scn" import a, b``.
 
-A part of the compiler (``sppl.lang.compile``), which it is mixed into. An imported file is
-compiled once per compilation, by a compiler of its own that shares the ``Loader``; what it
-offers (its classes, constants, colours and palettes) is a ``Module``. The loader also keeps
-the chain of files being imported, which is how a cycle is found, and the meshes already
-loaded.
+A part of the compiler (``sppl.lang.compile``), given the file's ``CompileContext``. An
+imported file is compiled once per compilation, by a compiler of its own (which the compiler
+passes in as a callback) that shares the ``Loader``; what it offers (its classes, constants,
+colours and palettes) is a ``Module``. The loader also keeps the chain of files being
+imported, which is how a cycle is found, and the meshes already loaded.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from ..errors import ModelError
+from ..errors import ModelError, Span
 from . import ast
+from .context import CompileContext, PendingClass
 from .expressions import BUILTINS, COLOUR, CONSTANT, PALETTE, RGB, Symbol, did_you_mean, known
 from .parser import parse
 
@@ -35,6 +37,8 @@ _EXPORTED = (CONSTANT, COLOUR, PALETTE)
 
 
 @dataclass
+
+
 class Module:
     """What an imported file offers: its classes and its top-level names."""
 
@@ -55,25 +59,40 @@ class Loader:
         self.meshes: dict[Path, str | None] = {}  # file: why it cannot be used, or None
 
 
-class ImportsMixin:
-    """The compiler's imports. Uses the compiler's ``program``, ``loader``, ``error``,
-    ``errors``, ``imported_errors``, ``symbols``, ``classes``, ``palette``, ``_declare``,
-    ``_add_class`` and ``_folder``."""
+def module_of(context: CompileContext) -> Module:
+    """What a compiled file offers the files that import it."""
+    exported = {
+        n: s for n, s in context.symbols.items() if n not in BUILTINS and s.kind in _EXPORTED
+    }
+    return Module(
+        context.program.path,
+        dict(context.classes),
+        exported,
+        dict(context.palette),
+        context.errors + context.imported_errors,
+    )
 
-    def module(self) -> Module:
-        exported = {
-            n: s for n, s in self.symbols.items() if n not in BUILTINS and s.kind in _EXPORTED
-        }
-        return Module(
-            self.program.path,
-            dict(self.classes),
-            exported,
-            dict(self.palette),
-            self.errors + self.imported_errors,
-        )
 
-    def _import(self, node: ast.Import) -> None:
-        module = self._load(node)
+# Adds a class to the file's classes (its name, the import that brings it): whether it was new.
+AddClass = Callable[[PendingClass, ast.Ident, Span], bool]
+# Checks an imported file's program with a compiler of its own, sharing the loader.
+CheckImport = Callable[[ast.Program, Loader], Module]
+
+
+class Imports:
+    """The ``import`` statements of one file."""
+
+    def __init__(
+        self, context: CompileContext, add_class: AddClass, check_import: CheckImport
+    ) -> None:
+        self.context = context
+        self.add_class = add_class
+        self.check_import = check_import
+
+    def load(self, node: ast.Import) -> None:
+        """Add the names the statement imports to the file's own."""
+        context = self.context
+        module = self._module(node)
         if module is None:
             return
         exports: dict[str, Any] = {**module.symbols, **module.classes}
@@ -85,7 +104,7 @@ class ImportsMixin:
                 if ident.text in exports:
                     wanted.append((ident, ident.text))
                     continue
-                self.error(
+                context.error(
                     f"`{node.path.value}` has no class, constant, colour or palette "
                     f"`{ident.text}`",
                     ident.span,
@@ -93,59 +112,60 @@ class ImportsMixin:
                 )
         for ident, name in wanted:
             if name in module.classes:
-                if self._add_class(module.classes[name], ident, node.span, imported=True):
+                if self.add_class(module.classes[name], ident, node.span):
                     # Its colours, for the model's record (the importer's own names win).
                     for colour, rgb in module.palette.items():
-                        self.palette.setdefault(colour, rgb)
+                        context.palette.setdefault(colour, rgb)
                 continue
             origin = module.symbols[name].imported or str(Path(module.path).resolve())
             symbol = replace(module.symbols[name], span=node.span, imported=origin)
-            existing = self.symbols.get(name)
+            existing = context.symbols.get(name)
             if existing is not None and existing.imported == origin:
                 continue  # the same name from the same file, through another import
-            if self._declare(ident, symbol):
+            if context.declare(ident, symbol):
                 if symbol.kind == COLOUR and symbol.value is not None:
-                    self.palette[name] = symbol.value
+                    context.palette[name] = symbol.value
                 if symbol.kind == PALETTE:
                     for colour in symbol.value:
                         if colour in module.palette:
-                            self.palette.setdefault(colour, module.palette[colour])
+                            context.palette.setdefault(colour, module.palette[colour])
 
-    def _load(self, node: ast.Import) -> Module | None:
+    def _module(self, node: ast.Import) -> Module | None:
         """The imported file, compiled (once per compilation), or None after reporting."""
+        context = self.context
         text = node.path.value
-        path = Path(os.path.normpath(self._folder() / text))
+        path = Path(os.path.normpath(context.folder() / text))
         if not path.is_file():
-            self.error(
+            context.error(
                 f"cannot find the imported file `{text}`",
                 node.path.span,
                 f"looked for {path}; the path is relative to the importing file",
             )
             return None
         resolved = path.resolve()
-        if resolved in self.loader.stack:
-            start = self.loader.stack.index(resolved)
-            chain = [p.name for p in self.loader.stack[start:]] + [resolved.name]
-            self.error(
+        if resolved in context.loader.stack:
+            start = context.loader.stack.index(resolved)
+            chain = [p.name for p in context.loader.stack[start:]] + [resolved.name]
+            context.error(
                 f"`{text}` is imported in a cycle: {' -> '.join(chain)}",
                 node.path.span,
                 "a file cannot import itself, directly or through other files",
             )
             return None
-        module = self.loader.modules.get(resolved)
+        module = context.loader.modules.get(resolved)
         first_time = module is None
         if module is None:
             module = self._compile_import(path, resolved)
-            self.loader.modules[resolved] = module
+            context.loader.modules[resolved] = module
         if module.errors:
             n = len(module.errors)
-            self.error(
+            context.error(
                 f"the imported file `{text}` has {n} error{'s' if n > 1 else ''}",
                 node.path.span,
                 "listed below",
             )
             if first_time:
-                self.imported_errors.extend(module.errors)
+                context.imported_errors.extend(module.errors)
         return module
 
     def _compile_import(self, path: Path, resolved: Path) -> Module:
@@ -153,10 +173,9 @@ class ImportsMixin:
             program = parse(read_source(path), str(path))
         except ModelError as error:
             return Module(str(path), {}, {}, {}, [error])
-        child = type(self)(program, self.loader, main=False)
-        self.loader.stack.append(resolved)
+        loader = self.context.loader
+        loader.stack.append(resolved)
         try:
-            child.check()
+            return self.check_import(program, loader)
         finally:
-            self.loader.stack.pop()
-        return child.module()
+            loader.stack.pop()

@@ -1,8 +1,9 @@
-"""The geometry of a model file: primitives, meshes, poses, footprints and static scenery.
+"""The geometry of a model file: primitives, meshes, poses and footprints.
 
-A part of the compiler (``sppl.lang.compile``), which it is mixed into: each construct is
-checked and compiled to a function from an object's values to posed parts (or to its
-footprint), folded to constants where it uses none of the object's values.
+A part of the compiler (``sppl.lang.compile``), given the file's ``CompileContext``: each
+construct is checked and compiled to a function from an object's values to posed parts (or to
+its footprint), folded to constants where it uses none of the object's values. Classes
+(``classes.py``) and static scenery (``scenery.py``) are built from these.
 """
 
 from __future__ import annotations
@@ -18,13 +19,13 @@ from ..model.geometry import MESH_PREFIX, ROUND_SECTIONS, Part, load_mesh, rotat
 from ..model.primitives import get_primitive, primitive_names
 from ..model.types import Values
 from . import ast
+from .context import CompileContext
 from .expressions import (
     Colour,
     Numeric,
     Scope,
     as_function,
     did_you_mean,
-    failure_reason,
     known,
 )
 
@@ -63,23 +64,25 @@ _MODIFIERS = {
     "footprint": ("at", "rotate", "scale"),
     "ground": ("colour", "size"),
 }
-_GROUND_SIZE = 20.0  # metres on a side
-_GROUND_THICKNESS = 0.01
 
 Matrix = np.ndarray | Callable[[Values], np.ndarray]
 
 
+class Shapes:
+    """The geometry of one file: what its classes and static elements are made of."""
 
-class ShapesMixin:
-    """The compiler's geometry. Uses the compiler's ``expr``, ``error``, ``loader``,
-    ``symbols``, ``static_parts``, ``statics``, ``ground``, ``_folder`` and ``_global_scope``."""
+    def __init__(self, context: CompileContext) -> None:
+        self.context = context
+        # What nearly every construct below uses.
+        self.expr = context.expr
+        self.error = context.error
 
-    def _geometry(
+    def geometry(
         self, node: ast.Geometry, scope: Scope
     ) -> Callable[[Values], tuple[Part, ...]] | None:
         """A function from parameter values to the posed parts, or None after reporting."""
         pieces = self._shape(node.primitive, scope)
-        transform = self._transform(node.modifiers, "geometry", scope)
+        transform = self.transform(node.modifiers, "geometry", scope)
         colour_modifier = modifier_of(node.modifiers, "colour")
         colour: Colour | None = None
         if colour_modifier is not None:
@@ -149,7 +152,7 @@ class ShapesMixin:
                 'a mesh is read from a file: mesh("file.obj")', expr.span, "the path is in quotes"
             )
             return None
-        path = Path(os.path.normpath(self._folder() / expr.value))
+        path = Path(os.path.normpath(self.context.folder() / expr.value))
         if not path.is_file():
             self.error(
                 f"cannot find the mesh file `{expr.value}`",
@@ -158,13 +161,13 @@ class ShapesMixin:
             )
             return None
         resolved = path.resolve()
-        if resolved not in self.loader.meshes:
+        if resolved not in self.context.loader.meshes:
             try:
                 load_mesh(str(resolved))
-                self.loader.meshes[resolved] = None
+                self.context.loader.meshes[resolved] = None
             except ValueError as error:
-                self.loader.meshes[resolved] = str(error)
-        problem = self.loader.meshes[resolved]
+                self.context.loader.meshes[resolved] = str(error)
+        problem = self.context.loader.meshes[resolved]
         if problem is not None:
             self.error(
                 f"the mesh file `{expr.value}` cannot be loaded as a triangle mesh",
@@ -174,7 +177,7 @@ class ShapesMixin:
             return None
         return MESH_PREFIX + str(resolved)
 
-    def _transform(
+    def transform(
         self, modifiers: tuple[ast.Modifier, ...], construct: str, scope: Scope
     ) -> Matrix | None:
         """translate @ rotate @ scale from the modifiers, checking which may be given."""
@@ -269,7 +272,7 @@ class ShapesMixin:
         functions = [as_function(f) for f in factors]
         return lambda values: np.diag([*(f(values) for f in functions), 1.0])
 
-    def _footprint(
+    def footprint(
         self, node: ast.Footprint, pose: Matrix, scope: Scope
     ) -> Callable[[Values], np.ndarray] | None:
         """A declared footprint: the shape's outline, posed by its modifiers and the pose."""
@@ -285,7 +288,7 @@ class ShapesMixin:
         arguments = _FOOTPRINTS[name]
         signature = f"{name}({', '.join(arguments)})"
         bound = self.expr.bind(call, arguments, signature)
-        transform = self._transform(node.modifiers, "footprint", scope)
+        transform = self.transform(node.modifiers, "footprint", scope)
         if bound is None or transform is None:
             return None
         if len(bound) != len(arguments):
@@ -302,70 +305,6 @@ class ShapesMixin:
             return (outline @ m.T)[:, :2]
 
         return footprint
-
-    # ---- static elements ----
-
-    def _static(self, node: ast.StaticDef) -> None:
-        name = node.name.text
-        if name in self.statics:
-            self.error(f"static `{name}` is already defined on line {self.statics[name].line}",
-                       node.name.span)
-        else:
-            self.statics[name] = node.span
-        scope = Scope(self.symbols, where="a static element")
-        poses = [item for item in node.body if isinstance(item, ast.Pose)]
-        for extra in poses[1:]:
-            self.error(f"`pose` is already given on line {poses[0].span.line}", extra.span)
-        pose = self._transform(poses[0].modifiers, "pose", scope) if poses else np.eye(4)
-        geometries = [item for item in node.body if isinstance(item, ast.Geometry)]
-        if not geometries:
-            self.error(f"static `{name}` has no geometry", node.name.span)
-        for item in geometries:
-            parts = self._geometry(item, scope)
-            if parts is None or pose is None:
-                continue
-            try:
-                self.static_parts.extend(posed(pose, parts)({}))
-            except (ArithmeticError, ValueError) as e:
-                self.error(f"this geometry cannot be evaluated: {failure_reason(e)}", item.span)
-
-    def _ground(self, node: ast.Ground) -> None:
-        if self.ground is not None:
-            self.error(f"the ground is already given on line {self.ground.line}", node.span)
-            return
-        self.ground = node.span
-        scope = self._global_scope("the ground")
-        ok = self._transform(
-            tuple(m for m in node.modifiers if m.keyword not in ("colour", "size")),
-            "ground",
-            scope,
-        )
-        seen: dict[str, ast.Modifier] = {}
-        for modifier in node.modifiers:
-            if modifier.keyword in seen and modifier.keyword in ("colour", "size"):
-                self.error(f"`{modifier.keyword}` is given twice", modifier.span)
-                ok = None
-            seen.setdefault(modifier.keyword, modifier)
-        colour = None
-        if "colour" in seen:
-            colour = self.expr.colour(seen["colour"].value, scope)
-        else:
-            self.error(
-                "the ground needs a colour", node.span, "e.g. `ground colour rgb(0.4, 0.4, 0.4)`"
-            )
-        size = _GROUND_SIZE
-        if "size" in seen:
-            size = self.expr.constant(seen["size"].value, scope)
-            if size is not None and size <= 0:
-                self.error(f"the size of the ground must be positive, got {size:g}",
-                           seen["size"].value.span)
-                size = None
-        if ok is None or colour is None or size is None:
-            return
-        matrix = np.diag([size, size, _GROUND_THICKNESS, 1.0])
-        matrix[2, 3] = -_GROUND_THICKNESS
-        # The ground is drawn first: objects resting on it hide its top face where they stand.
-        self.static_parts.insert(0, Part("box", matrix, tuple(float(c) for c in colour)))
 
 
 # ---- helpers ---------------------------------------------------------------------------------
