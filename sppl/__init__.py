@@ -43,6 +43,7 @@ from .model import (
                     scaling,
                     translation,
 )
+from .model.gl_statistics import GlStatistics, register_gl_statistics, registered_gl_statistics
 from .model.likelihoods import Gaussian, Likelihood, available_likelihoods, register_likelihood
 from .model.region import RegionError, bind_region
 from .model.robust import Mixture, StudentT
@@ -71,6 +72,7 @@ from .runs.chains import run_chains
 from .runs.dataset import find_scenes, run_dataset
 from .runs.executors import LocalExecutor, RayExecutor
 from .runs.run import run_chain
+from .scoring.protocol import ObservationScorer, ScorerProtocol
 from .scoring.scorer import PriorScorer, ReferenceScorer, Scorer
 from .verify import check_proposals, joint_check, verify_model
 
@@ -83,6 +85,7 @@ __all__ = [
     "Finite",
     "Gamma",
     "Gaussian",
+    "GlStatistics",
     "InferenceSettings",
     "Integer",
     "Interval",
@@ -95,6 +98,7 @@ __all__ = [
     "Normal",
     "ObjectClass",
     "ObservationError",
+    "ObservationScorer",
     "Observations",
     "Parameter",
     "Part",
@@ -112,6 +116,7 @@ __all__ = [
     "RunError",
     "Sampler",
     "Scorer",
+    "ScorerProtocol",
     "SeenPass",
     "Sensor",
     "SpplError",
@@ -139,7 +144,9 @@ __all__ = [
     "plot_occupancy",
     "pooled_samples",
     "raycast",
+    "register_gl_statistics",
     "register_likelihood",
+    "registered_gl_statistics",
     "render_observations",
     "rotation",
     "rotation_z",
