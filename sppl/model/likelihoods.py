@@ -10,6 +10,8 @@ ones, ``mixture`` and ``student_t`` (``sppl.model.robust``), have no sufficient 
 are scored at given noise values. Third-party
 packages add their own through the ``sppl.likelihoods`` entry-point group: the entry point's
 name is the name used in model files, and it points at a class implementing ``Likelihood``.
+A likelihood whose statistics the GL side can compute says which (``gl_statistics``, a name
+``sppl.model.gl_statistics`` registers), and is then scored without reading renders back.
 """
 
 from __future__ import annotations

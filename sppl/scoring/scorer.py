@@ -8,10 +8,11 @@ moves re-score without rendering.
 Two paths compute the same statistics. ``ReferenceScorer`` reads every camera's images back and
 calls the likelihood's ``statistics`` in numpy: slow and obviously right. ``Scorer`` computes the
 per-pixel terms on the GL side (``sppl.render.pixels``) for every likelihood that declares a
-GL-side version (``gl_statistics``, ``sppl.model.gl_statistics``), and given the trace a proposal comes from it re-renders
-only the pixels the changed objects covered before or cover now. It falls back to the
-reference path for any other likelihood, and for renderers that are not ``Renderer``. The
-images themselves are then rendered only when something asks for them (``Renders``).
+GL-side version (``gl_statistics``, ``sppl.model.gl_statistics``), and given the trace a
+proposal comes from it re-renders only the pixels the changed objects covered before or cover
+now. It falls back to the reference path for any other likelihood, and for renderers that are
+not ``Renderer``. The images themselves are then rendered only when something asks for them
+(``Renders``).
 """
 
 from __future__ import annotations
