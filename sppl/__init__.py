@@ -43,6 +43,7 @@ from .model import (
                     scaling,
                     translation,
 )
+from .model.gl_statistics import GlStatistics, register_gl_statistics, registered_gl_statistics
 from .model.likelihoods import Gaussian, Likelihood, available_likelihoods, register_likelihood
 from .model.primitives import Hits, Primitive, primitive_names, register_primitive
 from .model.region import RegionError, bind_region
@@ -72,6 +73,7 @@ from .runs.chains import run_chains
 from .runs.dataset import find_scenes, run_dataset
 from .runs.executors import LocalExecutor, RayExecutor
 from .runs.run import run_chain
+from .scoring.protocol import ObservationScorer, ScorerProtocol
 from .scoring.scorer import PriorScorer, ReferenceScorer, Scorer
 from .verify import check_proposals, joint_check, verify_model
 
@@ -84,6 +86,7 @@ __all__ = [
                     "Finite",
                     "Gamma",
                     "Gaussian",
+                    "GlStatistics",
                     "Hits",
                     "InferenceSettings",
                     "Integer",
@@ -97,6 +100,7 @@ __all__ = [
                     "Normal",
                     "ObjectClass",
                     "ObservationError",
+                    "ObservationScorer",
                     "Observations",
                     "Parameter",
                     "Part",
@@ -115,6 +119,7 @@ __all__ = [
                     "RunError",
                     "Sampler",
                     "Scorer",
+                    "ScorerProtocol",
                     "SeenPass",
                     "Sensor",
                     "SpplError",
@@ -143,8 +148,10 @@ __all__ = [
                     "pooled_samples",
                     "primitive_names",
                     "raycast",
+                    "register_gl_statistics",
                     "register_likelihood",
                     "register_primitive",
+                    "registered_gl_statistics",
                     "render_observations",
                     "rotation",
                     "rotation_z",

@@ -330,6 +330,94 @@ def test_a_likelihood_without_gl_statistics_falls_back_to_the_reference(require_
         _assert_agree(fast.statistics(truth), ref, truth, noise)
 
 
+class FloorNoise:
+    """A likelihood from outside sppl: Normal noise of scale sqrt(sigma^2 + floor^2), a floor
+    under the sensor's noise. Its statistics are the squared-residual ones, written here
+    afresh, and it says so."""
+
+    noise_parameters = ("sigma",)
+    gl_statistics = "squared_residual"
+    floor = 0.003
+
+    def statistics(self, observed, rendered, valid=None):
+        r = np.subtract(observed, rendered, dtype=np.float64)
+        r = (r if valid is None else r[valid]).ravel()
+        return np.array([r.size, float(r @ r)])
+
+    def log_prob(self, stats, noise):
+        n, ssr = stats
+        var = noise["sigma"] ** 2 + self.floor**2
+        return -0.5 * n * math.log(2.0 * math.pi * var) - 0.5 * ssr / var
+
+    def sample(self, rendered, noise, rng):
+        scale = math.hypot(noise["sigma"], self.floor)
+        return rendered + scale * rng.standard_normal(rendered.shape).astype(rendered.dtype)
+
+
+def test_a_plugin_that_declares_gl_statistics_is_scored_on_the_gl_side(require_gl, root,
+                                                                         registered):
+    """The declaration alone gives the fast path, with the same log-likelihood as reading
+    back; a subclass that changes the statistics without declaring again does not keep it."""
+
+    class Absolute(FloorNoise):
+        def statistics(self, observed, rendered, valid=None):
+            r = np.abs(np.subtract(observed, rendered, dtype=np.float64))
+            r = (r if valid is None else r[valid]).ravel()
+            return np.array([r.size, float(r.sum())])
+
+    registered("test-floor", FloorNoise)
+    registered("test-floor-absolute", Absolute)
+    model, renderer, obs, truth, noise = _setting(root, "shapes.scn")
+    rng = np.random.default_rng(2)
+    scenes = [(), truth, sample_objects(model, rng)]
+    for name, fast_path in (("test-floor", True), ("test-floor-absolute", False)):
+        sensors = {kind: Sensor(s.kind, name, s.noise, {}) for kind, s in model.sensors.items()}
+        custom = _replace(model, sensors=sensors)
+        fast, ref = Scorer(custom, obs, renderer), ReferenceScorer(custom, obs, renderer)
+        assert (fast.pixels is not None) == fast_path
+        for objects in scenes:
+            got = fast.statistics(objects)
+            if fast_path:
+                _assert_agree(got, ref, objects, noise)
+            else:
+                assert got.keys() == ref.statistics(objects).keys()
+                for key, value in ref.statistics(objects).items():
+                    np.testing.assert_array_equal(got[key], value)
+            exact = ref.log_likelihood(ref.statistics(objects), noise)
+            assert fast.log_likelihood(got, noise) == pytest.approx(exact, rel=1e-6)
+
+
+def test_both_scorers_are_the_protocol_the_sampler_asks_for(setting):
+    """``Scorer`` and ``ReferenceScorer`` have every member of ``ObservationScorer`` with its
+    parameters, ``PriorScorer`` the sampler's minimal protocol, and through the protocol's
+    calls the two score a scene alike."""
+    import inspect
+
+    from sppl.scoring.protocol import ObservationScorer, ScorerProtocol
+    from sppl.scoring.scorer import PriorScorer
+
+    model, renderer, obs, truth, noise = setting
+    fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
+    assert inspect.signature(Sampler.__init__).parameters["scorer"].annotation == "ScorerProtocol"
+    assert isinstance(PriorScorer(), ScorerProtocol)
+    methods = {name for name, member in inspect.getmembers(ObservationScorer, inspect.isfunction)
+               if not name.startswith("_")}
+    assert {"evaluate", "log_likelihood", "evaluate_batch", "rescore", "rendered",
+            "term_statistics"} <= methods
+    for scorer in (fast, ref):
+        assert isinstance(scorer, ScorerProtocol)
+        assert isinstance(scorer, ObservationScorer)
+        for name in methods:
+            wanted = list(inspect.signature(getattr(ObservationScorer, name)).parameters)
+            have = list(inspect.signature(getattr(type(scorer), name)).parameters)
+            assert have[: len(wanted)] == wanted, (type(scorer).__name__, name, have)
+    assert fast.pixels is not None  # the fast path, not the reference behind it
+    for objects in ((), truth):
+        got = [s.log_likelihood(s.evaluate(objects, None, noise)[0], noise) for s in (fast, ref)]
+        _, _, nats = tolerance(ref, objects, noise)
+        assert abs(got[0] - got[1]) <= nats
+
+
 def _replace(model, **changes):
     import dataclasses
 

@@ -123,3 +123,80 @@ def test_gaussian_scale_outside_its_domain_has_no_density():
         assert g.log_prob(stats_, {"sigma": sigma}) == -math.inf
     assert math.isnan(g.log_prob(stats_, {"sigma": math.nan}))
     assert g.log_prob(np.array([0.0, 0.0]), {"sigma": 0.0}) == 0.0  # nothing observed
+
+
+# -- which GL-side statistics serve a likelihood -------------------------------------------------
+
+def test_the_shipped_likelihoods_declare_their_gl_statistics():
+    from sppl.model.gl_statistics import registered_gl_statistics
+    from sppl.model.likelihoods import gpu_statistics
+    from sppl.model.robust import Mixture, StudentT, _PerPixel
+
+    found = registered_gl_statistics()
+    assert found["squared_residual"].reference is Gaussian.statistics
+    assert not found["squared_residual"].per_pixel and found["squared_residual"].shader is None
+    assert found["pixel_log_density"].reference is _PerPixel.statistics
+    assert found["pixel_log_density"].shader == "likelihood.glsl"
+    assert gpu_statistics(Gaussian()) == "squared_residual"
+    assert gpu_statistics(Mixture()) == gpu_statistics(StudentT()) == "pixel_log_density"
+    assert gpu_statistics(get_likelihood("mixture", {"inlier": "laplace"})) == "pixel_log_density"
+
+
+def test_a_subclass_that_redefines_what_the_gl_side_computes_is_scored_in_numpy():
+    from sppl.model.likelihoods import gpu_statistics
+    from sppl.model.robust import Mixture, StudentT
+
+    class OwnStatistics(Gaussian):
+        def statistics(self, observed, rendered, valid=None):
+            return super().statistics(observed, rendered, valid)
+
+    class Declared(OwnStatistics):
+        gl_statistics = "squared_residual"  # its author vouches they are the same
+
+    class OwnLogProb(Gaussian):
+        def log_prob(self, stats, noise):
+            return super().log_prob(stats, noise) - 1.0
+
+    class NoneDeclared(Gaussian):
+        gl_statistics = None
+
+    class OwnDensity(StudentT):
+        def pixel_log_density(self, *args, **kwargs):
+            return super().pixel_log_density(*args, **kwargs)
+
+    class OwnUniforms(Mixture):
+        def uniforms(self, values, k, high):
+            return super().uniforms(values, k, high)
+
+    class OwnSampling(Mixture):
+        def sample(self, rendered, noise, rng, depth_max=None):
+            return super().sample(rendered, noise, rng, depth_max)
+
+    class PerPixelGaussian(Gaussian):
+        per_pixel = True  # statistics of another shape than the sums
+
+    assert gpu_statistics(OwnStatistics()) is None
+    assert gpu_statistics(Declared()) == "squared_residual"
+    assert gpu_statistics(OwnLogProb()) == "squared_residual"
+    assert gpu_statistics(NoneDeclared()) is None
+    assert gpu_statistics(OwnDensity()) is None
+    assert gpu_statistics(OwnUniforms()) is None
+    assert gpu_statistics(OwnSampling()) == "pixel_log_density"
+    assert gpu_statistics(PerPixelGaussian()) is None
+
+
+def test_gl_statistics_are_registered_once_and_declared_by_a_registered_name():
+    from sppl.model.gl_statistics import register_gl_statistics, registered_gl_statistics
+    from sppl.model.likelihoods import gpu_statistics
+
+    with pytest.raises(SpplError, match="already registered"):
+        register_gl_statistics("squared_residual", Gaussian.statistics)
+    with pytest.raises(SpplError, match="shader"):
+        register_gl_statistics("test-no-shader", Gaussian.statistics, per_pixel=True)
+    assert "test-no-shader" not in registered_gl_statistics()
+
+    class Misspelt(Gaussian):
+        gl_statistics = "squared_residuals"
+
+    with pytest.raises(SpplError, match="'squared_residuals'.*squared_residual"):
+        gpu_statistics(Misspelt())

@@ -28,6 +28,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..model.types import Model, ObjectClass
+from ..scoring.protocol import ObservationScorer
 
 # A depth pixel is unexplained when it is nearer than the render by more than this, in metres.
 DEPTH_GAP = 0.1
@@ -45,7 +46,7 @@ _LOG_2PI = math.log(2.0 * math.pi)
 
 
 class BirthProposal:
-    def __init__(self, model: Model, scorer=None) -> None:
+    def __init__(self, model: Model, scorer: ObservationScorer | None = None) -> None:
         self.model = model
         self.weight = model.inference.data_birth if scorer is not None else 0.0
         self.spread = model.inference.data_birth_spread

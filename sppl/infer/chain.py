@@ -21,6 +21,7 @@ import numpy as np
 from ..model.region import bind_region
 from ..model.trace import Trace, noise_log_prior, objects_log_prior, overlaps_any
 from ..model.types import Model
+from ..scoring.protocol import ScorerProtocol
 from . import fit, fitted_birth, merge, moves, tries
 from .birth import BirthProposal
 from .warmup import Warmup
@@ -109,9 +110,11 @@ def _noise_args(sampler: Sampler, noise) -> tuple:
 
 
 class Sampler:
-    """Advances one chain. ``scorer`` renders and scores; ``rng`` is the chain's only randomness."""
+    """Advances one chain. ``scorer`` renders and scores (``sppl.scoring.protocol``: what a scorer
+    of observations has beyond ``ScorerProtocol`` is used where it has it); ``rng`` is the
+    chain's only randomness."""
 
-    def __init__(self, model: Model, scorer, rng: np.random.Generator) -> None:
+    def __init__(self, model: Model, scorer: ScorerProtocol, rng: np.random.Generator) -> None:
         # A `region cameras` becomes the ground the scorer's cameras see (sppl.model.region).
         self.model = model = bind_region(model, getattr(scorer, "cameras", {}).values())
         self.scorer = scorer

@@ -32,6 +32,7 @@ import math
 import numpy as np
 
 from ..model.trace import Trace
+from ..scoring.protocol import ScorerProtocol
 from .chain import Sampler, accept
 from .records import trace_from_record, trace_record
 
@@ -43,7 +44,7 @@ def ladder(rungs: int, hottest: float) -> list[float]:
     return [hottest ** (i / (rungs - 1)) for i in range(rungs)]
 
 
-def make_sampler(model, scorer, rng: np.random.Generator) -> Sampler:
+def make_sampler(model, scorer: ScorerProtocol, rng: np.random.Generator) -> Sampler:
     """The sampler a run uses: the tempered ladder where the model asks for one."""
     if model.inference.tempered > 1:
         return TemperedSampler(model, scorer, rng)
@@ -54,7 +55,7 @@ class TemperedSampler(Sampler):
     """The coldest rung of a tempered ladder, driving the others: its ``sweep`` sweeps every
     rung and then swaps neighbours, and returns the coldest rung's state."""
 
-    def __init__(self, model, scorer, rng: np.random.Generator) -> None:
+    def __init__(self, model, scorer: ScorerProtocol, rng: np.random.Generator) -> None:
         super().__init__(model, scorer, rng)
         self.powers = ladder(model.inference.tempered, model.inference.tempered_from)
         # The hotter rungs' generators are spawned from a draw of this chain's, so a seed

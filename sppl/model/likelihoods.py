@@ -10,6 +10,8 @@ ones, ``mixture`` and ``student_t`` (``sppl.model.robust``), have no sufficient 
 are scored at given noise values. Third-party
 packages add their own through the ``sppl.likelihoods`` entry-point group: the entry point's
 name is the name used in model files, and it points at a class implementing ``Likelihood``.
+A likelihood whose statistics the GL side can compute says which (``gl_statistics``, a name
+``sppl.model.gl_statistics`` registers), and is then scored without reading renders back.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from typing import Protocol
 import numpy as np
 
 from ..errors import SpplError
+from .gl_statistics import declared_gl_statistics, register_gl_statistics
 from .robust import Mixture, StudentT
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -36,6 +39,10 @@ class Likelihood(Protocol):
 
     #: Names of the noise parameters the model file must give this likelihood a prior for.
     noise_parameters: tuple[str, ...]
+    #: Optional: the GL-side computation (``sppl.model.gl_statistics``) that gives the same
+    #: statistics as ``statistics``, so that scoring need not read renders back; None or
+    #: absent: it reads them back and calls ``statistics``.
+    gl_statistics: str | None
 
     def statistics(
         self, observed: np.ndarray, rendered: np.ndarray, valid: np.ndarray | None
@@ -87,6 +94,7 @@ class Gaussian:
     """
 
     noise_parameters = ("sigma",)
+    gl_statistics = "squared_residual"
 
     def __init__(self, **options: float) -> None:
         if options:
@@ -121,22 +129,20 @@ def sample_observation(likelihood: Likelihood, rendered: np.ndarray, noise: Mapp
     return likelihood.sample(rendered, noise, rng)
 
 
-# The statistics that ``sppl.render.pixels`` computes on the GL side, keyed by the
-# ``statistics`` function they equal: "squared_residual" is (number of valid values, sum of
-# squared residuals over them). Keyed by the function, not by the likelihood class, so that a
-# subclass that redefines ``statistics`` falls back to the reference path, while one that
-# changes only ``log_prob`` (a Student-t on the same residuals, say) keeps the fast path.
-_GPU_STATISTICS: dict[Callable, str] = {Gaussian.statistics: "squared_residual"}
+register_gl_statistics(
+    "squared_residual", Gaussian.statistics,
+    description="(number of valid values, sum of their squared residuals), summed in float64 "
+                "from terms.frag's per-pixel squares",
+)
 
 
 def gpu_statistics(likelihood: Likelihood) -> str | None:
-    """Which GL-side computation gives this likelihood's statistics, or None if none does
-    (then scoring reads the renders back and calls ``statistics``). The robust likelihoods'
-    per-pixel terms are "pixel_log_density" (``shaders/likelihood.glsl``), for the classes of
-    ``sppl.model.robust`` whose per-pixel density the shader has (not for a subclass that changes it)."""
-    if type(likelihood) in (Mixture, StudentT):
-        return "pixel_log_density"
-    return _GPU_STATISTICS.get(getattr(type(likelihood), "statistics", None))
+    """The name of the GL-side computation that gives this likelihood's statistics, or None
+    if none does (then scoring reads the renders back and calls ``statistics``): the one its
+    class declares (``gl_statistics``), unless a subclass changed what that computation stands
+    in for (``sppl.model.gl_statistics``)."""
+    found = declared_gl_statistics(likelihood)
+    return None if found is None else found.name
 
 
 _BUILTIN: dict[str, Callable[..., Likelihood]] = {

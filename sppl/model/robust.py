@@ -42,6 +42,7 @@ import numpy as np
 from scipy.special import gammaln
 
 from ..errors import SpplError
+from .gl_statistics import register_gl_statistics
 
 _LOG_2PI = math.log(2.0 * math.pi)
 # The probabilities a model may fix or give a prior, and the range each must stay in.
@@ -189,11 +190,24 @@ class _PerPixel:
         return False
 
 
+register_gl_statistics(
+    "pixel_log_density", _PerPixel.statistics, shader="likelihood.glsl", per_pixel=True,
+    # Everything the shader's density copies, with the likelihood's own shader_term and
+    # uniforms; log_density too, since the GL terms are relative to the empty scene's, which
+    # is scored by it.
+    methods=("statistics", "log_density", "pixel_log_density", "_value", "_l1", "_constant",
+             "uniforms", "shader_term"),
+    description="[noise values..., sum of the per-pixel log densities at them], each pixel's "
+                "term computed by likelihood.glsl",
+)
+
+
 class Mixture(_PerPixel):
     """Each pixel an inlier around the rendering (probability 1 - outlier) or an outlier
     uniform over the sensor's range (see the module's docstring)."""
 
     name = "mixture"
+    gl_statistics = "pixel_log_density"
     _parameters = ("sigma", "outlier")
     _words = ("inlier", "returns")
 
@@ -247,6 +261,7 @@ class StudentT(_PerPixel):
     nu degrees of freedom (fixed with the option ``nu = 4``, or latent with a prior)."""
 
     name = "student_t"
+    gl_statistics = "pixel_log_density"
     _parameters = ("sigma", "nu")
 
     def _value(self, dist, in_range, values, k, high):

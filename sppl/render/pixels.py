@@ -106,17 +106,19 @@ class PixelScorer:
     """
 
     def __init__(self, settings: RenderSettings, cameras: Sequence[Camera], observed,
-                 terms: Mapping[str, int] | None = None) -> None:
+                 terms: Mapping[str, int] | None = None, shaders: Sequence[str] = ()) -> None:
         self.ctx = ctx = gl_context()
         self.compiled = compiled
         self.cameras = list(cameras)
-        # Which likelihood each modality's terms are (likelihood.glsl's defines; all 0: the
-        # Gaussian's), and per camera the robust ones' noise uniforms (``set_noise``).
+        # Which likelihood each modality's terms are (the defines of the ``shaders`` that
+        # compute per-pixel densities, as sppl.model.gl_statistics names them; all 0: the
+        # Gaussian's squared residuals), and per camera the robust ones' noise uniforms
+        # (``set_noise``).
         terms = {"IMAGE_TERM": 0, "DEPTH_TERM": 0, "DEPTH_RETURNS": 0, **(terms or {})}
         self._prelude = "".join(f"#define {k} {int(v)}\n" for k, v in terms.items())
-        if any(terms.values()):
+        for name in shaders:
             self._prelude += resources.files(__package__).joinpath(
-                "shaders", "likelihood.glsl").read_text(encoding="utf-8")
+                "shaders", name).read_text(encoding="utf-8")
         self._noise: list[dict[str, tuple]] = [{} for _ in self.cameras]
         # Each camera's observation stays bound to a texture unit of its own (while there
         # are units enough), so that a pass need not bind it.

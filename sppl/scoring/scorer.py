@@ -7,11 +7,12 @@ moves re-score without rendering.
 
 Two paths compute the same statistics. ``ReferenceScorer`` reads every camera's images back and
 calls the likelihood's ``statistics`` in numpy: slow and obviously right. ``Scorer`` computes the
-per-pixel terms on the GL side (``sppl.render.pixels``) for every likelihood that has a GL-side
-version (``likelihoods.gpu_statistics``), and given the trace a proposal comes from it re-renders
-only the pixels the changed objects covered before or cover now. It falls back to the
-reference path for any other likelihood, and for renderers that are not ``Renderer``. The
-images themselves are then rendered only when something asks for them (``Renders``).
+per-pixel terms on the GL side (``sppl.render.pixels``) for every likelihood that declares a
+GL-side version (``gl_statistics``, ``sppl.model.gl_statistics``), and given the trace a
+proposal comes from it re-renders only the pixels the changed objects covered before or cover
+now. It falls back to the reference path for any other likelihood, and for renderers that are
+not ``Renderer``. The images themselves are then rendered only when something asks for them
+(``Renders``).
 """
 
 from __future__ import annotations
@@ -26,7 +27,8 @@ import numpy as np
 from ..data.camera import Camera
 from ..data.observations import Observations
 from ..errors import ObservationError, SpplError
-from ..model.likelihoods import Likelihood, get_likelihood, gpu_statistics
+from ..model.gl_statistics import declared_gl_statistics
+from ..model.likelihoods import Likelihood, get_likelihood
 from ..model.types import RENDER_GROUP, Model, RenderSettings
 from ..render.bounds import CameraBounds, union, world_corners
 from ..render.lighting import block, caster_rows, shadow_corners
@@ -291,7 +293,8 @@ class Scorer(ReferenceScorer):
 
         if not fast or not isinstance(renderer, Renderer):
             return
-        slow = sorted({t.kind for t in self.terms if gpu_statistics(t.likelihood) is None})
+        declared = {t.kind: declared_gl_statistics(t.likelihood) for t in self.terms}
+        slow = sorted(kind for kind, found in declared.items() if found is None)
         if slow:
             log.info("the %s likelihood has no GL-side statistics: scoring reads renders back",
                      ", ".join(slow))
@@ -337,8 +340,9 @@ class Scorer(ReferenceScorer):
                 if kind == "depth" and likelihood.returns:
                     defines["DEPTH_RETURNS"] = 1
         self._noise_key = None  # the noise values the programs' uniforms hold
+        shaders = sorted({found.shader for found in declared.values() if found.shader})
         self.pixels = PixelScorer(renderer.settings, [self.cameras[f] for f in self.frames],
-                                  [observed[f] for f in self.frames], defines)
+                                  [observed[f] for f in self.frames], defines, shaders)
         self.draws = DrawCache([CameraBounds(self.cameras[f]) for f in self.frames])
         static = model.static_parts
         self._static = [self.draws.of_parts(static)] if static else []
