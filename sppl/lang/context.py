@@ -31,8 +31,6 @@ DEFAULT_PATH = "<string>"
 
 
 @dataclass
-
-
 class Owner:
     """A class or sensor being compiled; its parameters get their steps once all are known."""
 
@@ -45,8 +43,6 @@ class Owner:
 
 
 @dataclass(eq=False)
-
-
 class PendingClass(Owner):
     rate: float | None = None
     count: int | None = None
@@ -67,8 +63,6 @@ class PendingClass(Owner):
 
 
 @dataclass
-
-
 class PendingSensor(Owner):
     likelihood: str | None = None
     options: dict[str, float] = field(default_factory=dict)

@@ -37,8 +37,6 @@ _EXPORTED = (CONSTANT, COLOUR, PALETTE)
 
 
 @dataclass
-
-
 class Module:
     """What an imported file offers: its classes and its top-level names."""
 
