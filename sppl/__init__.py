@@ -14,6 +14,7 @@ from ._version import __version__  # noqa: F401  (sppl.__version__)
 from .data.observations import Observations, load_cameras, load_observations, write_observations
 from .errors import ModelError, ObservationError, RenderError, RunError, SpplError
 from .infer.chain import Sampler
+from .infer.moves import Proposal
 from .lang import compile_model, load_model, parse
 from .model import (
                     Beta,
@@ -43,6 +44,7 @@ from .model import (
                     scaling,
                     translation,
 )
+from .model.jumps import Jump, jump_names, register_jump, unregister_jump
 from .model.likelihoods import Gaussian, Likelihood, available_likelihoods, register_likelihood
 from .model.region import RegionError, bind_region
 from .model.robust import Mixture, StudentT
@@ -53,6 +55,7 @@ from .model.simulate import (
                     sample_noise,
                     sample_objects,
 )
+from .model.trace import make_object
 from .model.types import Model
 from .output.compare import compare_scenes
 from .output.posterior import load_run, open_posterior, write_posterior
@@ -86,6 +89,7 @@ __all__ = [
     "InferenceSettings",
     "Integer",
     "Interval",
+    "Jump",
     "Likelihood",
     "LocalExecutor",
     "LogNormal",
@@ -102,6 +106,7 @@ __all__ = [
     "Poisson",
     "Positive",
     "PriorScorer",
+    "Proposal",
     "RayExecutor",
     "Real",
     "ReferenceScorer",
@@ -128,17 +133,20 @@ __all__ = [
     "experiment",
     "find_scenes",
     "joint_check",
+    "jump_names",
     "load_cameras",
     "load_model",
     "load_observations",
     "load_run",
     "load_scene",
+    "make_object",
     "objects_from_dict",
     "open_posterior",
     "parse",
     "plot_occupancy",
     "pooled_samples",
     "raycast",
+    "register_jump",
     "register_likelihood",
     "render_observations",
     "rotation",
@@ -151,6 +159,7 @@ __all__ = [
     "scaling",
     "seen_reference",
     "translation",
+    "unregister_jump",
     "verify_model",
     "write_observations",
     "write_posterior",
