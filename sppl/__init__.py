@@ -14,6 +14,7 @@ from ._version import __version__  # noqa: F401  (sppl.__version__)
 from .data.observations import Observations, load_cameras, load_observations, write_observations
 from .errors import ModelError, ObservationError, RenderError, RunError, SpplError
 from .infer.chain import Sampler
+from .infer.moves import Proposal
 from .lang import compile_model, load_model, parse
 from .model import (
                     Beta,
@@ -44,6 +45,7 @@ from .model import (
                     translation,
 )
 from .model.gl_statistics import GlStatistics, register_gl_statistics, registered_gl_statistics
+from .model.jumps import Jump, jump_names, register_jump, unregister_jump
 from .model.likelihoods import Gaussian, Likelihood, available_likelihoods, register_likelihood
 from .model.primitives import Hits, Primitive, primitive_names, register_primitive
 from .model.region import RegionError, bind_region
@@ -55,6 +57,7 @@ from .model.simulate import (
                     sample_noise,
                     sample_objects,
 )
+from .model.trace import make_object
 from .model.types import Model
 from .output.compare import compare_scenes
 from .output.posterior import load_run, open_posterior, write_posterior
@@ -91,6 +94,7 @@ __all__ = [
     "InferenceSettings",
     "Integer",
     "Interval",
+    "Jump",
     "Likelihood",
     "LocalExecutor",
     "LogNormal",
@@ -109,6 +113,7 @@ __all__ = [
     "Positive",
     "Primitive",
     "PriorScorer",
+    "Proposal",
     "RayExecutor",
     "Real",
     "ReferenceScorer",
@@ -136,11 +141,13 @@ __all__ = [
     "experiment",
     "find_scenes",
     "joint_check",
+    "jump_names",
     "load_cameras",
     "load_model",
     "load_observations",
     "load_run",
     "load_scene",
+    "make_object",
     "objects_from_dict",
     "open_posterior",
     "parse",
@@ -149,6 +156,7 @@ __all__ = [
     "primitive_names",
     "raycast",
     "register_gl_statistics",
+    "register_jump",
     "register_likelihood",
     "register_primitive",
     "registered_gl_statistics",
@@ -163,6 +171,7 @@ __all__ = [
     "scaling",
     "seen_reference",
     "translation",
+    "unregister_jump",
     "verify_model",
     "write_observations",
     "write_posterior",

@@ -18,11 +18,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..model.jumps import jump, jump_names
 from ..model.region import bind_region
 from ..model.trace import Trace, noise_log_prior, objects_log_prior, overlaps_any
 from ..model.types import Model
 from ..scoring.protocol import ScorerProtocol
-from . import fit, fitted_birth, merge, moves, tries
+from . import (
+    jumps,  # noqa: F401  (registers the built-in jumps)
+    moves,
+)
 from .birth import BirthProposal
 from .warmup import Warmup
 
@@ -351,10 +355,13 @@ class Sampler:
         self.warmup.load_state_dict(state["warmup"])
 
     def jump_type(self, u: float) -> str:
-        """The jump type that a uniform draw ``u`` picks, in the order of ``moves.JUMPS``."""
-        total, last = 0.0, moves.JUMPS[0]
-        for kind in moves.JUMPS:
-            p = self.jump[kind]
+        """The jump type that a uniform draw ``u`` picks, in the order of registration
+        (``sppl.model.jumps``)."""
+        names = jump_names()
+        total, last = 0.0, names[0]
+        for kind in names:
+            # A jump registered after this sampler was made has no probability in it.
+            p = self.jump.get(kind, 0.0)
             if p > 0:
                 total += p
                 if u < total:
@@ -363,30 +370,7 @@ class Sampler:
         return last  # u within rounding of 1
 
     def propose_jump(self, trace: Trace) -> moves.Proposal | None:
-        kind = self.jump_type(self.rng.random())
-        if kind == "refit":
-            return fit.propose_refit(self, trace, self.rng)
-        if kind == "merge":
-            return merge.propose_merge(self, trace, self.rng)
-        if kind == "split":
-            return merge.propose_split(self, trace, self.rng)
-        if kind == "fitted_birth":
-            return fitted_birth.propose_fitted_birth(self, trace, self.rng)
-        if kind == "fitted_death":
-            return fitted_birth.propose_fitted_death(self, trace, self.rng)
-        if kind == "change":
-            return moves.propose_change(self.model, trace, self.rng)
-        m = self.model.inference.tries
-        if m > 1:  # multiple-try births, deaths and replaces (sppl.infer.tries)
-            return {"birth": tries.propose_birth, "death": tries.propose_death,
-                    "replace": tries.propose_replace}[kind](self, trace, self.rng, m)
-        if kind == "birth":
-            return moves.propose_birth(self.model, trace, self.rng, self.birth)
-        if kind == "death":
-            return moves.propose_death(self.model, trace, self.rng, self.birth)
-        return moves.propose_replace(
-            self.model, trace, self.rng, self.birth, lambda objs: self.make_trace(objs, trace.noise)
-        )
+        return jump(self.jump_type(self.rng.random())).propose(self, trace, self.rng)
 
     def prune(self, trace: Trace) -> Trace:
         """Greedy deaths that raise the score, until none does.

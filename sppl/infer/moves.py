@@ -21,20 +21,16 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import SpplError
+from ..model.jumps import jump, jump_names
 from ..model.trace import SceneObject, Trace, make_object
 from ..model.types import RENDER_GROUP, Model, ObjectClass
 from .birth import BirthProposal
 
-JUMPS = ("birth", "death", "change", "replace", "refit", "merge", "split", "fitted_birth",
-         "fitted_death")
-# The jumps that start from what the observations leave unexplained, and so never act without
-# observations.
-FROM_OBSERVATIONS = ("fitted_birth", "fitted_death")
-
 
 @dataclass(frozen=True, eq=False)
 class Proposal:
-    move: str  # "parameters", "noise", or a jump of JUMPS
+    move: str  # "parameters", "noise", "render", or a registered jump (sppl.model.jumps)
     label: str  # class name, or sensor kind for noise moves: acceptance is counted per label
     objects: tuple[SceneObject, ...]
     noise: Mapping[str, Mapping[str, float]]
@@ -60,13 +56,22 @@ def jump_probabilities(model: Model, observed: bool = True) -> dict[str, float]:
     observations (``observed`` false: the prior's scorer) nothing is ever unexplained, so
     fitted births and deaths could never act, and the other jumps take their share.
     """
+    names = jump_names()
     w = dict(model.inference.jump_weights)
+    unknown = sorted(j for j, weight in w.items() if weight > 0 and j not in names)
+    if unknown:
+        # A model compiled where a jump was registered, run where it is not (another
+        # process): its weight must not silently count for nothing.
+        raise SpplError(f"the model weighs the jump{'s' if len(unknown) > 1 else ''} "
+                        f"{', '.join(unknown)}, not registered in this process; import the "
+                        "module that registers it before running the model here")
     if len(model.classes) < 2:
         w["change"] = 0.0
-    if not observed and any(w.get(j, 0.0) for j in JUMPS if j not in FROM_OBSERVATIONS):
-        w.update(dict.fromkeys(FROM_OBSERVATIONS, 0.0))
-    total = sum(w.get(j, 0.0) for j in JUMPS)
-    return {j: w.get(j, 0.0) / total for j in JUMPS}
+    from_observations = [j for j in names if jump(j).needs_observations]
+    if not observed and any(w.get(j, 0.0) for j in names if j not in from_observations):
+        w.update(dict.fromkeys(from_observations, 0.0))
+    total = sum(w.get(j, 0.0) for j in names)
+    return {j: w.get(j, 0.0) / total for j in names}
 
 
 def _log(p: float) -> float:

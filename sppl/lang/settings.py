@@ -12,6 +12,7 @@ import math
 from collections.abc import Mapping
 
 from ..model.domains import Finite
+from ..model.jumps import jump_names, reverse_pairs
 from ..model.types import LIGHTING, RENDER_GROUP, InferenceSettings, RenderSettings
 from . import ast
 from .context import CompileContext, PendingSensor
@@ -26,8 +27,6 @@ _NONNEGATIVE = ("ambient", "intensity", "sheen", "gain", "red", "blue")
 _UNIT = ("ambient", "sheen")
 _INFERENCE_KEYS = ("p_jump", "data_birth", "data_birth_spread", "adapt", "anneal", "anneal_from",
                    "tries", "tempered", "tempered_from")
-_JUMPS = tuple(InferenceSettings().jump_weights)
-_REVERSE_JUMPS = (("birth", "death"), ("merge", "split"), ("fitted_birth", "fitted_death"))
 
 
 class Settings:
@@ -166,13 +165,15 @@ class Settings:
                     self.inference_values[key] = value
 
     def _jump_weight_settings(self, node: ast.JumpWeights, scope: Scope) -> None:
+        # The registered jumps, the built-in ones (sppl.infer.jumps) and any a user added.
+        names = jump_names()
         for setting in node.weights:
             key = setting.key.text
-            if key not in _JUMPS:
+            if key not in names:
                 self.error(
                     f"unknown jump `{key}`",
                     setting.key.span,
-                    did_you_mean(key, _JUMPS) or known("jumps", _JUMPS),
+                    did_you_mean(key, names) or known("jumps", names),
                 )
             elif self.context.first(("jump_weights", key), setting):
                 weight = self.expr.constant(setting.value, scope)
@@ -184,8 +185,8 @@ class Settings:
                     self.jump_weights[key] = weight
         weights = {**InferenceSettings().jump_weights, **self.jump_weights}
         # Each pair is each other's reverse: one without the other cannot be balanced.
-        unpaired = next(((a, b) for a, b in _REVERSE_JUMPS
-                         if (weights[a] > 0) != (weights[b] > 0)), None)
+        unpaired = next(((a, b) for a, b in reverse_pairs()
+                         if (weights.get(a, 0.0) > 0) != (weights.get(b, 0.0) > 0)), None)
         if unpaired is not None:
             self.error(f"{unpaired[0]} and {unpaired[1]} need both a positive weight or both "
                        "zero", node.span)

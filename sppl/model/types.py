@@ -20,6 +20,7 @@ import numpy as np
 from .distributions import Distribution
 from .domains import Domain, is_continuous
 from .geometry import Part, footprint_of
+from .jumps import default_weights
 
 Values = Mapping[str, Any]
 
@@ -226,15 +227,12 @@ class InferenceSettings:
     # draw from the prior (sppl/infer/birth.py), and the spread of that placement in metres.
     data_birth: float = 0.5
     data_birth_spread: float = 0.25
-    # Relative weights of the model jumps. The thesis has birth, death and change, equally
-    # weighted; replace (sppl.infer.moves.propose_replace) is sppl's addition.
-    # refit (sppl.infer.fit), merge and split (sppl.infer.merge), fitted_birth and fitted_death
-    # (sppl.infer.fitted_birth) are off unless a model weighs them.
-    jump_weights: Mapping[str, float] = field(
-        default_factory=lambda: {"birth": 1.0, "death": 1.0, "change": 1.0, "replace": 1.0,
-                                 "refit": 0.0, "merge": 0.0, "split": 0.0,
-                                 "fitted_birth": 0.0, "fitted_death": 0.0}
-    )
+    # Relative weights of the model jumps, by default each registered jump's own
+    # (sppl.model.jumps). The thesis has birth, death and change, equally weighted; replace
+    # (sppl.infer.moves.propose_replace) is sppl's addition. refit (sppl.infer.fit), merge and
+    # split (sppl.infer.merge), fitted_birth and fitted_death (sppl.infer.fitted_birth) are off
+    # unless a model weighs them (sppl.infer.jumps registers them all).
+    jump_weights: Mapping[str, float] = field(default_factory=default_weights)
     # The warm-up (sppl/infer/warmup.py): sweeps of proposal-scale adaptation, and of an annealed
     # likelihood rising from the power anneal_from to 1; both are burned and then stop.
     adapt: int = 0

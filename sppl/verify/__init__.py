@@ -17,7 +17,7 @@ checks catch it, on the shipped models in the test suite and on a user's own mod
   the successive-conditional one alternates a sweep of the sampler given simulated
   observations with fresh observations simulated from the new state. If the sampler is right,
   both have the prior as their marginal over scenes.
-- ``move_checks`` (``reverses``): every move and its reverse (``sppl.moves.reverse``): applying a proposal
+- ``move_checks`` (``reverses``): every move and its reverse (``sppl.infer.jumps.reverse``): applying a proposal
   and then its reverse gives back the same trace, and the two log acceptance ratios are
   negatives of each other.
 - ``sbc`` (``calibration``): simulation-based calibration: the rank of a true value among posterior draws is

@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..infer import moves
+from ..infer import jumps, moves
 from ..infer.chain import Sampler
 from ..model.simulate import sample_noise, sample_objects
 from ..model.trace import Trace
@@ -39,18 +39,15 @@ def check_reverse(sampler: Sampler, trace: Trace, proposal) -> tuple[float, floa
     """Apply a proposal and then its reverse. Returns (log alpha forward, log alpha of the
     reverse, whether the reverse gave back ``trace``), or None when the proposal has zero prior
     (it would be rejected before rendering, and has no reverse). Raises ``ValueError`` for a
-    move type that ``sppl.infer.moves.reverse`` does not know."""
+    move type without a reverse, or a jump whose reverse is not the jump it declares
+    (``sppl.infer.jumps.reverse``)."""
     if proposal is None:
         return None
     new = sampler.evaluate(trace, proposal)
     if new is None:
         return None
     forward = sampler.log_alpha(trace, proposal, new)
-    if proposal.tries is not None:  # a multiple-try jump or a refit, undone with the same draws
-        rev = proposal.tries.reverse(sampler, trace, proposal, new)
-    else:
-        rev = moves.reverse(sampler.model, trace, proposal, new, sampler.birth,
-                            without=lambda objs: sampler.make_trace(objs, new.noise))
+    rev = jumps.reverse(sampler, trace, proposal, new)
     back = sampler.evaluate(new, rev)
     if back is None:
         return forward, -math.inf, False
@@ -82,8 +79,8 @@ def move_checks(
 
     The model jumps are the sampler's own: ``Sampler.propose_jump`` is called until each jump
     type with a positive probability (``Sampler.jump``) has been proposed once from the state,
-    so a new kind of jump is checked without naming it here (and fails if
-    ``sppl.infer.moves.reverse`` does not know it). Then a parameter move of each block of one
+    so a new kind of jump is checked without naming it here (and fails where it is not
+    registered with a reverse, ``sppl.model.jumps``). Then a parameter move of each block of one
     object, and a move of each noise parameter. With sensors (and ``observe``), the states are
     scored against observations of another prior scene, so that data-driven births (which
     look at what a state leaves unexplained) are among those checked; without, against no
