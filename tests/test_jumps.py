@@ -110,14 +110,14 @@ def _nothing(sampler, trace, rng):
 
 
 def test_registration_needs_a_reverse_that_declares_the_jump_back():
-    with pytest.raises(ValueError, match="'grow' declares 'shrink' as its reverse, which is not"):
+    with pytest.raises(SpplError, match="'grow' declares 'shrink' as its reverse, which is not"):
         register_jump(Jump("grow", _nothing, "shrink", _nothing))
-    with pytest.raises(ValueError, match="'grow' declares 'birth' as its reverse, but 'birth' "
-                                         "declares 'death'"):
+    with pytest.raises(SpplError, match="'grow' declares 'birth' as its reverse, but 'birth' "
+                                        "declares 'death'"):
         register_jump(Jump("grow", _nothing, "birth", _nothing))
-    with pytest.raises(ValueError, match="'birth' is registered twice"):
+    with pytest.raises(SpplError, match="'birth' is registered twice"):
         register_jump(Jump("birth", _nothing, "birth", _nothing))
-    with pytest.raises(ValueError, match="remove the two together"):
+    with pytest.raises(SpplError, match="remove the two together"):
         unregister_jump("merge")
     assert "grow" not in jump_names()
     register_jump(Jump("grow", _nothing, "shrink", _nothing),
@@ -199,3 +199,36 @@ def test_a_model_file_weighs_a_jump_once_it_is_registered(rescale):
     unregister_jump(rescale.NAME)
     with pytest.raises(SpplError, match="weighs the jump rescale, not registered"):
         Sampler(model, PriorScorer(), np.random.default_rng(0))
+
+
+def test_an_installed_package_offers_jumps_through_the_entry_point_group(rescale, monkeypatch):
+    """A pair from an entry point is registered when the registry is first read, in any
+    process, so a worker that never imported the package knows the jump too."""
+    from sppl.model import jumps as registry
+
+    grow = Jump("grow", _nothing, "shrink", _nothing)
+    shrink = Jump("shrink", _nothing, "grow", _nothing)
+
+    class EntryPoint:
+        def __init__(self, name, loaded):
+            self.name, self.value, self.loaded = name, f"pkg:{name}", loaded
+
+        def load(self):
+            if isinstance(self.loaded, Exception):
+                raise self.loaded
+            return self.loaded
+
+    found = [EntryPoint("rescale", rescale.RESCALE), EntryPoint("grow", (grow, shrink))]
+    monkeypatch.setattr(registry, "entry_points", lambda group: found if group == "sppl.jumps"
+                        else [])
+    monkeypatch.setattr(registry, "_plugins_loaded", False)
+    try:
+        names = jump_names()
+        assert names[-3:] == ("rescale", "grow", "shrink")
+        assert ("grow", "shrink") in reverse_pairs()
+    finally:
+        unregister_jump("grow", "shrink")
+    monkeypatch.setattr(registry, "_plugins_loaded", False)
+    found[:] = [EntryPoint("broken", ImportError("no module named pkg"))]
+    with pytest.raises(SpplError, match="the jump plugin 'broken' .* failed to load"):
+        jump_names()
