@@ -12,9 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy import ndimage
 from test_fast_scoring import SPECS, _assert_agree
-from test_render import RED, SETTINGS, random_camera, top_down
+from test_render import RED, SETTINGS, ray_cast_mismatches, top_down
 
 from sppl import (
     Observations,
@@ -28,7 +27,6 @@ from sppl import (
     raycast,
     register_primitive,
     render_observations,
-    rotation,
     sample_noise,
     sample_objects,
     scaling,
@@ -97,29 +95,7 @@ def test_a_registered_shape_compiles_and_poses_like_a_built_in_one(dome):
 def test_the_gl_renderer_draws_it_as_the_ray_caster_does(dome, gl_renderer, depth_type):
     """As test_render holds the built-in round shapes: posed domes (rotated, unevenly
     scaled) beside a box, coverage, depth and shade pixel for pixel."""
-    rng = np.random.default_rng(11)
-    mismatched = 0
-    for _ in range(12):
-        axis = rng.normal(size=3)
-        pose = (translation(*rng.uniform(-1, 1, 2), rng.uniform(-0.3, 0.5))
-                @ rotation(axis / np.linalg.norm(axis), rng.uniform(0, 2 * np.pi))
-                @ scaling(*rng.uniform(0.3, 1.2, 3)))
-        parts = [Part("dome", pose, tuple(rng.uniform(0.2, 1.0, 3))),
-                 Part("box", translation(0.6, 0.4, 0.0) @ scaling(0.5, 0.5, 0.5), RED)]
-        camera = random_camera(rng, 48, 40, depth_type)
-        rgb, depth = gl_renderer.render(parts, camera)
-        rgb_ref, depth_ref = raycast(parts, camera, SETTINGS)
-        hit, hit_ref = depth < camera.depth_max, depth_ref < camera.depth_max
-        assert hit_ref.any()
-        mismatched += int(np.sum(hit != hit_ref))
-        both = hit & hit_ref
-        apart = np.abs(depth_ref - depth) > 1e-3
-        assert np.sum(apart & both) <= 2
-        edge = ndimage.binary_dilation(apart, iterations=1)
-        assert np.abs(depth - depth_ref)[both & ~edge].max() <= 1e-4
-        shade = np.abs(rgb - rgb_ref).max(axis=-1)[both & ~edge]
-        mismatched += int(np.sum(shade > 1e-4))
-    assert mismatched <= 2  # of 12 x 1920 pixels: only a ray grazing a silhouette may differ
+    assert ray_cast_mismatches(gl_renderer, "dome", depth_type, seed=11) <= 2
 
 
 @pytest.mark.parametrize("draw", ["gl", "raycast"])
