@@ -38,8 +38,9 @@ Hits = list[tuple[np.ndarray, np.ndarray]]
 class Primitive:
     """A shape that model files name in a geometry line, ``name(arguments...)``.
 
-    A *base* shape has a unit shape (``mesh``) resting on the ground, its lowest point at
-    z = 0 and its axis the z axis, which a part poses with one 4x4 matrix; ``scale`` maps the
+    A *base* shape has a unit shape (``mesh``, a closed solid: the renderers skip the back
+    faces of every registered shape) resting on the ground, its lowest point at z = 0 and its
+    axis the z axis, which a part poses with one 4x4 matrix; ``scale`` maps the
     geometry line's arguments to that matrix's scale along x, y and z. A *composite* shape
     has no mesh of its own: ``pieces`` maps the arguments to base shapes, each under its own
     matrix (a capsule is a cylinder and two spheres).
