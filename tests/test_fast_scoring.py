@@ -520,3 +520,27 @@ def test_one_pixel_scored_differently_is_caught(setting, monkeypatch):
     assert len(scenes) >= 3
     if model.path.name == "shapes.scn":
         assert loose >= len(scenes) // 2
+
+
+def test_a_per_pixel_sensor_without_observations_still_compiles(require_gl, root, tmp_path):
+    """shapes.scn scores depth per pixel (its mixture), but a data set of RGB cameras has no
+    depth term: the terms pass is still compiled with the mixture's define, so it needs the
+    shader that defines its density, and the scene scores as the reference scores it."""
+    model = load_model(root / "models" / "shapes.scn")
+    renderer = Renderer(model.render)
+    rng = np.random.default_rng(4)
+    truth = sample_objects(model, rng)
+    noise = sample_noise(model, rng)
+    frames = render_observations(model, truth, noise, [SPECS[1]], renderer, rng)
+    obs = Observations(tmp_path, frames)
+    fast, ref = Scorer(model, obs, renderer), ReferenceScorer(model, obs, renderer)
+    assert "depth" in fast.per_pixel and {t.kind for t in fast.terms} == {"image"}
+    assert fast.pixels is not None
+    for objects in [truth, *(sample_objects(model, rng) for _ in range(4))]:
+        stats, _ = fast.evaluate(objects, None, noise)
+        ref_stats, _ = ref.evaluate(objects, None, noise)
+        assert stats.keys() == ref_stats.keys()
+        for key, (n, ssr) in ref_stats.items():  # the image's Gaussian sums
+            assert stats[key][0] == n
+            assert stats[key][1] == pytest.approx(ssr, rel=1e-5, abs=1e-6)
+    renderer.release()

@@ -333,14 +333,20 @@ class Scorer(ReferenceScorer):
         self._fast_at: dict[tuple, bool] = {}  # _fast's answers, by noise key
         self._empty: dict[tuple, float] = {}  # (term key, noise key, balance) -> the empty scene's
         defines = {}
+        shaders = {found.shader for found in declared.values() if found.shader}
         for kind, name in (("image", "IMAGE_TERM"), ("depth", "DEPTH_TERM")):
             likelihood = self.likelihoods.get(kind)
             if kind in self.per_pixel:
                 defines[name] = likelihood.shader_term
                 if kind == "depth" and likelihood.returns:
                     defines["DEPTH_RETURNS"] = 1
+                # A modality whose density is defined in, with no observation of it in these
+                # data (an RGB-only camera set), still compiles its density's code.
+                found = declared_gl_statistics(likelihood)
+                if found is not None and found.shader:
+                    shaders.add(found.shader)
         self._noise_key = None  # the noise values the programs' uniforms hold
-        shaders = sorted({found.shader for found in declared.values() if found.shader})
+        shaders = sorted(shaders)
         self.pixels = PixelScorer(renderer.settings, [self.cameras[f] for f in self.frames],
                                   [observed[f] for f in self.frames], defines, shaders)
         self.draws = DrawCache([CameraBounds(self.cameras[f]) for f in self.frames])
