@@ -164,3 +164,22 @@ def test_a_missing_mug_on_the_table_is_seeded_where_it_stands(require_gl, root, 
     assert len(seeds) >= 1
     assert np.linalg.norm(seeds - (0.25, 0.1), axis=1).min() < 0.08, seeds
     assert len(sampler.birth.seeds(sampler.make_trace(truth, scene["noise"]))) == 0
+
+
+def test_the_depth_gap_follows_the_depth_maps_noise():
+    """A sloping floor with a box on it, seen with noise 0.03 m: the estimate is within a
+    tenth of it, which neither the slope nor the box's edges move; pixels at the far plane
+    and invalid ones are left out."""
+    from sppl.infer.birth import depth_noise
+
+    rng = np.random.default_rng(0)
+    v, u = np.mgrid[0:80, 0:80]
+    depth = 2.0 + 0.02 * u + 0.01 * v
+    depth[20:50, 30:60] -= 0.4
+    depth[:5] = 8.0  # beyond the camera's range
+    valid = np.ones(depth.shape, bool)
+    valid[60:] = False
+    noisy = np.where(depth < 8.0, depth + 0.03 * rng.standard_normal(depth.shape), depth)
+    noisy[60:] = -1.0  # what an invalid pixel holds is never read
+    assert depth_noise(noisy, valid, 8.0) == pytest.approx(0.03, rel=0.1)
+    assert depth_noise(depth, None, 8.0) == pytest.approx(0.0, abs=1e-9)

@@ -74,8 +74,9 @@ def observed_chain(tries: int, sweeps: int = 60, seed: int = 1):
 
 # What each chain ended with (objects, score, the generator's next draw, the acceptance counts)
 # when the jumps were dispatched by an if-chain, before the registry: a change that draws in
-# another order, or proposes anything else, shows here. observed3 was recorded again when the
-# data-driven birth's thresholds changed (sppl/infer/birth.py), which its births use.
+# another order, or proposes anything else, shows here. The observed chains were recorded
+# again when the data-driven birth's thresholds changed (sppl/infer/birth.py): their births
+# use them.
 RECORDED = Path(__file__).parent / "fixtures" / "jump_chains.json"
 CHAINS = {"prior1": lambda: prior_chain(1), "prior3": lambda: prior_chain(3),
           "observed1": lambda: observed_chain(1), "observed3": lambda: observed_chain(3)}

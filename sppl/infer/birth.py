@@ -31,9 +31,9 @@ from ..model.geometry import lowest_point
 from ..model.types import Model, ObjectClass
 from ..scoring.protocol import ObservationScorer
 
-# A depth pixel is unexplained when it is nearer than the render by more than this, in metres:
-# five times the depth noise the shipped models expect, and less than the height of a mug
-# standing on a table, which its table top behind it shows 6 to 11 cm further away.
+# A depth pixel is unexplained when it is nearer than the render by more than twice the depth
+# map's noise (``depth_noise``), and at least this, in metres: less than the height of a mug
+# standing on a table, which the table top behind it shows 6 to 11 cm further away.
 DEPTH_GAP = 0.05
 # An RGB pixel is unexplained when its mean absolute colour difference exceeds this: a red
 # mug on a wooden table differs from it by 0.12 to 0.2.
@@ -57,6 +57,12 @@ class BirthProposal:
         self.terms = list(getattr(scorer, "terms", []))
         self.scorer = scorer
         self.floor = support_height(model)
+        # Per depth term: the gap that counts as unexplained. Twice the noise keeps noisy
+        # maps (5 cm) from seeding at every pixel the noise pushes forward; a function of
+        # the observations alone, so the proposal stays a function of the state.
+        self.depth_gaps = {t.frame: max(DEPTH_GAP, 2.0 * depth_noise(t.observed, t.valid,
+                                                                      t.camera.depth_max))
+                           for t in self.terms if t.kind == "depth"}
         # Per camera: world ray directions, the ray-to-axis factor, and the centre.
         self.rays = {
             t.frame: (t.camera.ray_directions(), t.camera.ray_to_z(), t.camera.position)
@@ -87,7 +93,7 @@ class BirthProposal:
             dirs, ray_to_z, centre = self.rays[t.frame]
             rendered = self.scorer.rendered(renders, t)
             if t.kind == "depth":
-                near = t.observed < rendered - DEPTH_GAP
+                near = t.observed < rendered - self.depth_gaps[t.frame]
                 near &= t.observed < t.camera.depth_max * (1.0 - 1e-3)
                 if t.valid is not None:
                     near &= t.valid
@@ -177,6 +183,21 @@ def support_height(model: Model) -> float:
             values[p.name] = p.sample(rng, values)
         lows.append(lowest_point(c.parts(values)))
     return float(np.median(lows)) if lows else 0.0
+
+
+def depth_noise(observed: np.ndarray, valid: np.ndarray | None, far: float) -> float:
+    """A robust estimate of a depth map's noise scale, in metres: the median absolute second
+    difference along rows, over runs of three measured pixels, scaled to a Gaussian's
+    standard deviation (a second difference of independent noise has variance 6 sigma^2; a
+    surface's slope cancels in it, and its edges are too few to move the median)."""
+    ok = observed < far * (1.0 - 1e-3)
+    if valid is not None:
+        ok &= valid
+    second = observed[:, :-2] - 2.0 * observed[:, 1:-1] + observed[:, 2:]
+    runs = ok[:, :-2] & ok[:, 1:-1] & ok[:, 2:]
+    if not runs.any():
+        return 0.0
+    return float(np.median(np.abs(second[runs])) / 0.6745 / math.sqrt(6.0))
 
 
 def _cached(trace, key: str, compute) -> np.ndarray:
