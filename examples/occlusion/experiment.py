@@ -5,7 +5,7 @@
     python examples/occlusion/experiment.py --quick    # a smoke test: a few hundred sweeps
 
 A red cube stands in front of a green cone, so that one RGB camera sees only the cone's tip
-(14 of its 108 pixels); a blue sphere stands in the open. The script simulates the observation
+(14 of its 110 pixels); a blue sphere stands in the open. The script simulates the observation
 (examples/occlusion/cameras.json and scene.json), samples the posterior with models/shapes.scn,
 by default with parallel tempering added to its inference block (--tempered, --tempered-from),
 and asks how much mass the posterior puts on an object in the cube's shadow (the ground the
