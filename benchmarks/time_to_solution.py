@@ -1,6 +1,8 @@
 """Time to a correct scene: run `sppl sample`'s chain with default settings on each shipped
 example for several seeds, and report when the MAP scene first has the right number of objects,
-the right classes and colours, and every position within 0.15 m of the truth.
+the right classes and colours, and every position within 0.15 m of the truth; for occlusion's
+hidden cone, of which the one camera sees only the tip, a place the image allows instead
+(`occlusion_check`).
 
     python benchmarks/time_to_solution.py                          # every example, seeds 0-4
     python benchmarks/time_to_solution.py --examples three_shapes  # one example
@@ -9,7 +11,8 @@ the right classes and colours, and every position within 0.15 m of the truth.
 
 Examples: three_shapes (its shipped obs/), and single_object, occlusion and fusion, whose
 observations are simulated from their cameras.json and scene.json as their experiment scripts
-do (seed 1), each sampled with the model its script uses. The MAP is checked every
+do (seed 1), each sampled with the model its script uses (occlusion's as shipped, without the
+parallel tempering its script adds by default). The MAP is checked every
 --check-every sweeps (the best sample so far, pruned as `sppl sample` reports it); the time of
 the first correct check is the time to solution. With --full each seed runs all its sweeps, as
 `sppl sample` does, and the table also says whether the MAP that run reports at its end is
@@ -36,6 +39,14 @@ from sppl.output.compare import compare_scenes  # noqa: E402
 from sppl.runs.experiment import simulate  # noqa: E402
 from sppl.runs.run import run_chain  # noqa: E402
 
+from examples.occlusion.shadow import (  # noqa: E402
+    ALLOWED_NATS,
+    Shadow,
+    allowed,
+    profile,
+    profile_distances,
+)
+
 SHAPES = ROOT / "models" / "shapes.scn"
 # Per example: the model it samples with, and its observations (None: simulated).
 EXAMPLES = {
@@ -54,11 +65,95 @@ def observations_of(name: str, work: Path) -> Path:
     return simulate(SHAPES, here / "cameras.json", here / "scene.json", work / name, seed=1)
 
 
-def solve(model, obs, truth, seed, steps, limit, check_every, tolerance, full=False,
+class Check:
+    """Whether an estimated scene is right: the right number of objects, and each true one
+    matched (by position) by one of its class and colours within ``tolerance`` metres."""
+
+    def __init__(self, truth, tolerance: float) -> None:
+        self.truth = truth
+        self.tolerance = tolerance
+
+    def errors(self, estimate):
+        """The errors the table prints: of the objects the position criterion applies to."""
+        return compare_scenes(estimate, self.truth)
+
+    def __call__(self, estimate) -> bool:
+        return self.errors(estimate).correct(self.tolerance)
+
+    def note(self, estimate) -> str:
+        return ""
+
+
+class HiddenCheck(Check):
+    """``Check`` for the objects in view, and for one true object the camera barely sees (the
+    occlusion example's cone, of which the image shows the tip): an estimated object of its
+    class and colours standing in ``shadow`` at a distance from the camera in ``distances``
+    (nearest, farthest), the ones at which the image cannot tell it from the truth. Its
+    position along the ray is not checked against the truth's, since the observations do not
+    determine it."""
+
+    def __init__(self, truth, hidden: int, shadow: Shadow, distances, tolerance: float) -> None:
+        super().__init__(truth, tolerance)
+        self.hidden = truth[hidden]
+        self.visible = truth[:hidden] + truth[hidden + 1:]
+        self.shadow = shadow
+        self.distances = distances
+
+    def placed(self, o) -> bool:
+        """``o`` is the hidden object in a place the observations allow."""
+        cats = {k: v for k, v in self.hidden["params"].items() if isinstance(v, str)}
+        lo, hi = self.distances
+        return (o["class"] == self.hidden["class"]
+                and all(o["params"].get(k) == v for k, v in cats.items())
+                and self.shadow.contains(o) and lo <= self.shadow.distance(o) <= hi)
+
+    def _split(self, estimate):
+        """(the hidden object's stand-in, the rest), the stand-in chosen so that the rest is
+        right if any choice makes it so; (None, everything) where nothing stands in."""
+        first = None
+        for i, o in enumerate(estimate):
+            if self.placed(o):
+                rest = list(estimate[:i]) + list(estimate[i + 1:])
+                if compare_scenes(rest, self.visible).correct(self.tolerance):
+                    return o, rest
+                first = first or (o, rest)
+        return first or (None, list(estimate))
+
+    def errors(self, estimate):
+        found, rest = self._split(estimate)
+        return compare_scenes(rest, self.visible if found is not None else self.truth)
+
+    def __call__(self, estimate) -> bool:
+        found, rest = self._split(estimate)
+        return (found is not None and len(estimate) == len(self.truth)
+                and compare_scenes(rest, self.visible).correct(self.tolerance))
+
+    def note(self, estimate) -> str:
+        found, _ = self._split(estimate)
+        return f"{self.shadow.distance(found):.2f}" if found is not None else "none"
+
+
+def occlusion_check(model, obs, scene, tolerance: float, nats: float = ALLOWED_NATS):
+    """The occlusion example's check: the red cube and the blue sphere within ``tolerance``;
+    the green cone, of which the camera sees the tip above the cube, anywhere in the cube's
+    shadow (as examples/occlusion/experiment.py counts it) at a distance from the camera where
+    the likelihood profile of the true scene (shadow.profile: the cone replaced by one showing
+    the same tip from that distance) stays within ``nats`` of its best."""
+    truth = scene["objects"]
+    camera = obs.cameras[0]
+    front, hidden = truth[0], truth[1]
+    shadow = Shadow(camera.position, front, hidden, camera.depth_max)
+    rows = profile(model, obs, scene, 1, camera.position, hidden, profile_distances(shadow))
+    return HiddenCheck(truth, 1, shadow, allowed(rows, nats), tolerance)
+
+
+def solve(model, obs, right, seed, steps, limit, check_every, full=False,
           clock=time.monotonic):
-    """One chain; ``clock`` measures its seconds (``time.process_time`` counts only this
-    process's CPU time, which a machine shared with other work does not inflate)."""
-    state = {"solved_at": None, "seconds": None, "errors": None, "last_best": None}
+    """One chain; ``right`` says whether a scene is right (a ``Check``); ``clock`` measures
+    its seconds (``time.process_time`` counts only this process's CPU time, which a machine
+    shared with other work does not inflate)."""
+    state = {"solved_at": None, "seconds": None, "errors": None, "note": "",
+             "last_best": None}
     t0 = clock()
 
     def check(step, trace, best, sampler):
@@ -67,10 +162,9 @@ def solve(model, obs, truth, seed, steps, limit, check_every, tolerance, full=Fa
             return elapsed > limit
         if best is not state["last_best"]:
             state["last_best"] = best
-            pruned = sampler.prune(best)
-            errors = compare_scenes([o.as_dict() for o in pruned.objects], truth)
-            state["errors"] = errors
-            if errors.correct(tolerance) and state["solved_at"] is None:
+            pruned = [o.as_dict() for o in sampler.prune(best).objects]
+            state["errors"], state["note"] = right.errors(pruned), right.note(pruned)
+            if right(pruned) and state["solved_at"] is None:
                 state["solved_at"], state["seconds"] = step, clock() - t0
                 if not full:
                     return True
@@ -80,7 +174,9 @@ def solve(model, obs, truth, seed, steps, limit, check_every, tolerance, full=Fa
         result = run_chain(model, obs, Path(tmp), steps=steps, seed=seed, progress=False, callback=check)
     state["total_seconds"] = clock() - t0
     state["steps_run"] = result.summary["steps_done"]
-    state["final"] = compare_scenes(result.summary["map"]["objects"], truth)
+    final = result.summary["map"]["objects"]
+    state["final"], state["final_note"] = right.errors(final), right.note(final)
+    state["final_right"] = right(final)
     state["map"] = result.summary["map"]
     state["noise"] = result.summary["noise"]  # posterior means and sds after burn-in
     return state
@@ -114,10 +210,22 @@ def main(argv=None) -> int:
             model_path = args.model or EXAMPLES[name][0]
             model = load_model(model_path)
             obs = load_observations(obs_path)
-            truth = json.loads((obs_path / "scene.json").read_text())["objects"]
+            scene = json.loads((obs_path / "scene.json").read_text())
+            truth = scene["objects"]
             print(f"\n{name}: model {model_path.name}, {len(obs.frames)} cameras, "
                   f"{len(truth)} true objects")
-            totals.append((name, run_seeds(model, obs, truth, steps, args)))
+            if name == "occlusion":
+                # The one camera sees the cone's tip only; where along its ray the cone stands
+                # the image does not say (docs/occlusion.md), so that is not asked of the MAP.
+                check = occlusion_check(load_model(SHAPES), obs, scene, args.tolerance)
+                lo, hi = check.distances
+                print(f"right: the cube and the sphere within {args.tolerance:g} m; a green "
+                      f"cone in the cube's shadow, {lo:.2f} to {hi:.2f} m from the camera (the "
+                      f"true scene's profile within {ALLOWED_NATS:g} nats of its best; the "
+                      f"truth: {check.shadow.distance(check.hidden):.2f} m)")
+            else:
+                check = Check(truth, args.tolerance)
+            totals.append((name, run_seeds(model, obs, check, steps, args)))
     print("\n| example | solved | median s | worst s |")
     print("|---|---:|---:|---:|")
     for name, (solved, n, median, worst) in totals:
@@ -125,24 +233,30 @@ def main(argv=None) -> int:
     return 0
 
 
-def run_seeds(model, obs, truth, steps, args):
+def run_seeds(model, obs, check, steps, args):
+    hidden = isinstance(check, HiddenCheck)
     print(f"{'seed':>4} {'solved':>6} {'steps':>7} {'seconds':>8} {'count':>7} {'class':>5} "
           f"{'colour':>6} {'max pos err (m)':>15}"
+          + (f" {'hidden cone at (m)':>18}" if hidden else "")
           + (f" {'final MAP':>9} {'all steps':>9} {'total s':>8}" if args.full else ""))
+    if hidden:
+        print("(count, class, colour, position: of the objects besides the cone found in the "
+              "shadow, against the cube and the sphere; of all, where there is no such cone)")
     rows = []
     for seed in args.seeds:
-        r = solve(model, obs, truth, seed, steps, args.limit, args.check_every, args.tolerance,
-                  args.full)
+        r = solve(model, obs, check, seed, steps, args.limit, args.check_every, args.full)
         e = r["final"] if args.full else r["errors"]
+        note = r["final_note"] if args.full else r["note"]
         solved = r["solved_at"] is not None
         rows.append(r)
         line = (f"{seed:>4} {('yes' if solved else 'no'):>6} "
                 f"{(r['solved_at'] if solved else r['steps_run']):>7} "
                 f"{(r['seconds'] if solved else r['total_seconds']):>8.1f} "
                 f"{f'{e.n_estimated}/{e.n_true}':>7} {e.wrong_class:>5} {e.wrong_category:>6} "
-                f"{e.max_position_error:>15.3f}")
+                f"{e.max_position_error:>15.3f}"
+                + (f" {note:>18}" if hidden else ""))
         if args.full:
-            ok = "right" if e.correct(args.tolerance) else "wrong"
+            ok = "right" if r["final_right"] else "wrong"
             line += f" {ok:>9} {r['steps_run']:>9} {r['total_seconds']:>8.1f}"
         print(line, flush=True)
     # An unsolved seed counts as never: it is the worst, and above the median when it is

@@ -96,3 +96,63 @@ def test_blocks_appearance_reads_cycles_renders_better_than_the_old_one(root, re
     assert shipped < 0.25
     assert wrong(1, 0.6, 0.45, "--sheen", 0.07) > shipped + 0.1
     assert wrong(0.8, 1.2, 0.35, "--no-shadows") > 0.9
+
+
+def test_occlusion_check_asks_only_what_the_image_tells(root, require_gl, tmp_path):
+    """time_to_solution.py's check for examples/occlusion: the hidden cone may stand anywhere
+    along the camera's ray that its likelihood profile allows (a cone far along the ray that
+    shows the same tip is right), but in the cube's shadow and green; the cube and the sphere
+    stay within the tolerance."""
+    import json
+
+    import numpy as np
+
+    sys.path.insert(0, str(root / "benchmarks"))
+    try:
+        import time_to_solution as tts
+    finally:
+        sys.path.remove(str(root / "benchmarks"))
+    from examples.occlusion.shadow import along_ray
+    from sppl.data.observations import load_observations
+    from sppl.lang import load_model
+    from sppl.runs.experiment import simulate
+
+    here = root / "examples" / "occlusion"
+    obs_path = simulate(tts.SHAPES, here / "cameras.json", here / "scene.json", tmp_path / "obs",
+                        seed=1)
+    obs = load_observations(obs_path)
+    scene = json.loads((obs_path / "scene.json").read_text())
+    cube, cone, sphere = scene["objects"]
+    check = tts.occlusion_check(load_model(tts.SHAPES), obs, scene, 0.15)
+    eye = obs.cameras[0].position
+    lo, hi = check.distances
+    true_distance = check.shadow.distance(cone)
+    # The profile is flat from where the cone clears the cube to where the ground shows above
+    # the cube: metres, the truth among them.
+    assert lo < true_distance < hi and hi - lo > 2.0, check.distances
+
+    far = along_ray(eye, cone, true_distance + 1.5)
+    assert check.shadow.contains(far)
+    assert check([cube, far, sphere])
+    assert check([sphere, cube, cone])
+    assert check.note([cube, far, sphere]) == f"{true_distance + 1.5:.2f}"
+
+    # Beside the wedge, at the same distance: the camera would see the whole cone.
+    turn = np.radians(15.0)
+    v = np.array([cone["params"]["x"], cone["params"]["y"]]) - eye[:2]
+    beside = {"class": "cone", "params": dict(cone["params"], **dict(zip(
+        "xy", eye[:2] + [v[0] * np.cos(turn) - v[1] * np.sin(turn),
+                         v[0] * np.sin(turn) + v[1] * np.cos(turn)])))}
+    assert not check.shadow.contains(beside)
+    assert not check([cube, beside, sphere])
+    assert check.note([cube, beside, sphere]) == "none"
+    # Past the range the profile allows, where the ground shows above the cube.
+    assert not check([cube, along_ray(eye, cone, hi + 0.5), sphere])
+    red = {"class": "cone", "params": dict(far["params"], c="red")}
+    assert not check([cube, red, sphere])
+    assert not check([cube, {"class": "cube", "params": dict(far["params"], a=0.0, s=0.3)},
+                      sphere])
+    # The objects in view are still held to the tolerance, and to the count.
+    moved = {"class": "cube", "params": dict(cube["params"], x=cube["params"]["x"] + 0.3)}
+    assert not check([moved, far, sphere])
+    assert not check([cube, far, sphere, dict(far, params=dict(far["params"], c="blue"))])
