@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
 
 from scenes_in_view import draw_in_view
-from time_to_solution import solve
+from time_to_solution import Check, solve
 
 from sppl.data.observations import load_cameras, load_observations
 from sppl.infer.chain import Sampler
@@ -87,8 +87,8 @@ def run_model(name: str, model_path: Path, args, work: Path) -> list[dict]:
         obs = load_observations(obs_path)
         truth_objects, truth_noise = load_scene(model, obs_path / "scene.json")
         tolerance = TOLERANCE.get(name, args.tolerance)
-        r = solve(model, obs, scene["objects"], args.chain_seed, args.steps, args.limit,
-                  args.check_every, tolerance, clock=time.process_time)
+        r = solve(model, obs, Check(scene["objects"], tolerance), args.chain_seed, args.steps,
+                  args.limit, args.check_every, clock=time.process_time)
         map_objects, _ = load_scene(model, _scene_file(work, r["map"]))
         solved = r["solved_at"] is not None
         gap = (log_joint(model, obs, map_objects, r["map"]["noise"])

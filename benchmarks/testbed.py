@@ -35,7 +35,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
 
-from time_to_solution import solve
+from time_to_solution import Check, solve
 
 from sppl.data.observations import load_observations
 from sppl.lang import load_model
@@ -60,8 +60,8 @@ def run_one(entry: dict, renderer: str, args) -> dict:
     model = load_model(args.model or ROOT / entry["model"])
     truth_file = json.loads((folder / "scene.json").read_text())
     truth = truth_file["objects"]
-    r = solve(model, load_observations(folder), truth, args.seed, args.steps, args.limit,
-              args.check_every, args.tolerance, full=True, clock=time.process_time)
+    r = solve(model, load_observations(folder), Check(truth, args.tolerance), args.seed,
+              args.steps, args.limit, args.check_every, full=True, clock=time.process_time)
     final = r["final"]
     row = {
         "scene": entry["name"], "renderer": renderer, "objects": len(truth),
