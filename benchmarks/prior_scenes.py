@@ -8,6 +8,7 @@ the truth's.
     python benchmarks/prior_scenes.py --models blocks --scenes 5 --limit 30
     python benchmarks/prior_scenes.py --model-file my.scn --models shapes   # other settings
     python benchmarks/prior_scenes.py --json run.json        # every row, with its MAP
+    python benchmarks/prior_scenes.py --models tabletop --first 24   # scenes 24-29 only
 
 Scene i of a model has 2 + (i mod 5) objects and is drawn by ``scenes_in_view.draw_in_view``
 from the seed (--seed, model); it is rendered by ``sppl.runs.experiment.simulate`` with the noise of
@@ -80,6 +81,8 @@ def run_model(name: str, model_path: Path, args, work: Path) -> list[dict]:
     cameras = ROOT / "examples" / "models" / name / "cameras.json"
     rows = []
     for i, scene in enumerate(scenes_of(name, args.scenes, args.seed)):
+        if i < args.first:
+            continue
         scene_file = work / f"{name}_{i}.json"
         scene_file.write_text(json.dumps(scene))
         obs_path = simulate(ROOT / "models" / f"{name}.scn", cameras, scene_file,
@@ -134,6 +137,9 @@ def main(argv=None) -> int:
     p.add_argument("--model-file", type=Path, default=None,
                    help="sample with this model file instead of the shipped one (one --models)")
     p.add_argument("--scenes", type=int, default=30, help="scenes per model (default 30)")
+    p.add_argument("--first", type=int, default=0,
+                   help="run scenes from this one on (the same scenes: all are drawn), to finish "
+                   "a run that stopped")
     p.add_argument("--seed", type=int, default=SEED, help="the scenes' seed")
     p.add_argument("--chain-seed", type=int, default=0)
     p.add_argument("--steps", type=int, default=1_000_000, help="sweeps per chain at most")
