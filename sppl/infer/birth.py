@@ -27,8 +27,8 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from ..model.geometry import lowest_point
 from ..model.types import Model, ObjectClass
+from ..render.bounds import world_corners
 from ..scoring.protocol import ObservationScorer
 
 # A depth pixel is unexplained when it is nearer than the render by more than twice the depth
@@ -94,9 +94,7 @@ class BirthProposal:
             rendered = self.scorer.rendered(renders, t)
             if t.kind == "depth":
                 near = t.observed < rendered - self.depth_gaps[t.frame]
-                near &= t.observed < t.camera.depth_max * (1.0 - 1e-3)
-                if t.valid is not None:
-                    near &= t.valid
+                near &= _measured(t.observed, t.valid, t.camera.depth_max)
                 near = _blobs(near)
                 dist = t.observed[near]
                 if t.camera.depth_type == "z":
@@ -181,7 +179,8 @@ def support_height(model: Model) -> float:
         values: dict[str, Any] = {}
         for p in c.parameters:
             values[p.name] = p.sample(rng, values)
-        lows.append(lowest_point(c.parts(values)))
+        # Its parts' posed bounding boxes: exact for upright parts, never above a tilted one.
+        lows.append(float(world_corners(c.parts(values))[2].min()))
     return float(np.median(lows)) if lows else 0.0
 
 
@@ -190,14 +189,18 @@ def depth_noise(observed: np.ndarray, valid: np.ndarray | None, far: float) -> f
     difference along rows, over runs of three measured pixels, scaled to a Gaussian's
     standard deviation (a second difference of independent noise has variance 6 sigma^2; a
     surface's slope cancels in it, and its edges are too few to move the median)."""
-    ok = observed < far * (1.0 - 1e-3)
-    if valid is not None:
-        ok &= valid
+    ok = _measured(observed, valid, far)
     second = observed[:, :-2] - 2.0 * observed[:, 1:-1] + observed[:, 2:]
     runs = ok[:, :-2] & ok[:, 1:-1] & ok[:, 2:]
     if not runs.any():
         return 0.0
     return float(np.median(np.abs(second[runs])) / 0.6745 / math.sqrt(6.0))
+
+
+def _measured(observed: np.ndarray, valid: np.ndarray | None, far: float) -> np.ndarray:
+    """The depth pixels that measured a surface: valid, and nearer than the camera's range."""
+    ok = observed < far * (1.0 - 1e-3)
+    return ok & valid if valid is not None else ok
 
 
 def _cached(trace, key: str, compute) -> np.ndarray:

@@ -124,21 +124,6 @@ def ground_points(parts: tuple[Part, ...] | list[Part]) -> np.ndarray:
     return np.concatenate([(_outline(p.primitive) @ p.matrix.T)[:, :2] for p in parts])
 
 
-def lowest_point(parts: tuple[Part, ...] | list[Part]) -> float:
-    """The lowest height of some parts' bounding boxes: each unit shape's box, posed by its
-    part's matrix. Exact for upright parts; never above the true lowest point otherwise."""
-    lows = []
-    for p in parts:
-        try:
-            lo, hi = unit_mesh(p.primitive).bounds
-        except KeyError:  # a shape of other shapes: its unit shape rests on the ground
-            lo, hi = np.zeros(3), np.zeros(3)
-        corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                            for z in (lo[2], hi[2])])
-        lows.append(float((corners @ p.matrix[2]).min()))
-    return min(lows) if lows else 0.0
-
-
 def footprint_of(parts: tuple[Part, ...] | list[Part]) -> np.ndarray:
     """The convex ground-plane footprint of some parts: an (M, 2) counter-clockwise polygon."""
     hull = shapely.convex_hull(shapely.MultiPoint(ground_points(parts)))
