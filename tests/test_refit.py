@@ -87,8 +87,8 @@ def test_the_fit_is_deterministic_and_improves_the_scene(require_gl):
         a = fit.fit(sampler, state, cls, objects[0])
         b = fit.fit(sampler, state, cls, objects[0])
         assert a == b
-        start = fit._start(cls, objects[0])
-        assert fit._score(sampler, state, cls, a) >= fit._score(sampler, state, cls, start)
+        for start in fit._starts(cls, objects[0]):
+            assert fit._score(sampler, state, cls, a) >= fit._score(sampler, state, cls, start)
 
 
 def _renderer(model):
@@ -193,3 +193,44 @@ def test_a_reverse_fit_left_undone_changes_no_decision(require_gl, root, monkeyp
     monkeypatch.setattr(fit, "refitted_back", too_low)
     wrong, _ = _shapes_chain(root, Sampler)
     assert wrong != eager
+
+
+def test_a_sphere_refitted_as_a_cube_finds_the_small_cube(require_gl, root):
+    """A small cube (side 0.22 m, turned 0.35 rad) on shapes.scn, seen by the example's
+    cameras, explained by a sphere in its place: the refit as a cube lands on it (side within
+    2 cm, turn within 0.15 rad modulo the cube's quarter turn, place within 3 cm) in at least
+    9 of 10 scenes, the cube's place drawn from a fixed seed. 9 do. With the start's side and
+    turn from one fixed prior draw (0.6 m) 5 did; the search walked away from the pixels, as
+    the sphere of scene 20 of the prior benchmark did when refitted as a sphere, to one 4 mm
+    across. Without the turns tried before and after the search, 8."""
+    from sppl.data.observations import Observations, load_cameras
+    from sppl.infer.chain import Sampler
+    from sppl.lang import load_model
+    from sppl.model.simulate import objects_from_dict, render_observations
+    from sppl.model.trace import make_object
+    from sppl.scoring.scorer import Scorer
+
+    model = load_model(root / "models" / "shapes.scn")
+    cameras = load_cameras(root / "examples" / "models" / "shapes" / "cameras.json")
+    renderer = _renderer(model)
+    found = []
+    for seed in range(10):
+        rng = np.random.default_rng(seed)
+        cube = {"x": 0.4 + 0.2 * rng.standard_normal(), "y": -0.6 + 0.2 * rng.standard_normal(),
+                "a": 0.35, "s": 0.22, "c": "red"}
+        scene = {"objects": [{"class": "cube", "params": cube},
+                             {"class": "sphere", "params": {"x": -0.8, "y": 0.7, "r": 0.4,
+                                                            "c": "blue"}}],
+                 "noise": {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}}}
+        truth = objects_from_dict(model, scene)
+        frames = render_observations(model, truth, scene["noise"], cameras, renderer, rng)
+        sampler = Sampler(model, Scorer(model, Observations(root, frames), renderer), rng)
+        state = sampler.make_trace(truth[1:], scene["noise"])
+        sphere = make_object(model, model.object_class("sphere"),
+                             {"x": cube["x"], "y": cube["y"], "r": 0.12, "c": "red"})
+        fitted = fit.fit(sampler, state, model.object_class("cube"), sphere)
+        turn = (fitted["a"] - 0.35 + math.pi / 4) % (math.pi / 2) - math.pi / 4
+        found.append(abs(fitted["s"] - 0.22) < 0.02 and abs(turn) < 0.15
+                     and math.hypot(fitted["x"] - cube["x"], fitted["y"] - cube["y"]) < 0.03)
+    renderer.release()
+    assert sum(found) >= 9, found

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from ..model.domains import Finite
+from ..model.domains import Finite, Periodic
 from ..model.trace import SceneObject, Trace, make_object
 from ..model.types import ObjectClass
 from .moves import Proposal
@@ -52,6 +52,15 @@ START_STEP = 4.0
 SPREADS = (0.5, 0.05, 0.005)
 HALVINGS = 6
 MAX_EVALUATIONS = 100
+# Where the search starts for the parameters the object it replaces does not have (a cube's
+# side and angle where a sphere stood): the best of this many fixed draws of the class's
+# prior. A single draw starts a small cube's fit from a side of 0.6 m, a size from which the
+# search walks off to a local optimum far from the pixels.
+START_DRAWS = 16
+# An angle's score has a local optimum at each turn where an edge lines up, which a search by
+# steps does not leave: before it, each periodic parameter is tried at this many turns evenly
+# spread over its period.
+TURNS = 8
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
@@ -68,15 +77,21 @@ class Refit:
                              target=old, state=self.state)
 
 
-def _start(cls: ObjectClass, like: SceneObject) -> dict[str, Any]:
-    """Where the search starts: the values of ``like`` that ``cls`` has (by name and domain),
-    the others from a fixed draw of the class's prior."""
-    values = cls.sample_prior(np.random.default_rng(0))
-    for p in cls.parameters:
-        q = like.cls.parameter(p.name)
-        if q is not None and q.domain == p.domain:
-            values[p.name] = like.values[p.name]
-    return values
+def _starts(cls: ObjectClass, like: SceneObject, keep=None) -> list[dict[str, Any]]:
+    """Where the search may start: the values of ``like`` that ``cls`` has (by name and
+    domain; only those named in ``keep`` if given), the others from each of START_DRAWS fixed
+    draws of the class's prior (one draw where every parameter is kept)."""
+    shared = [p.name for p in cls.parameters
+              if (keep is None or p.name in keep)
+              and (q := like.cls.parameter(p.name)) is not None and q.domain == p.domain]
+    rng = np.random.default_rng(0)
+    draws = START_DRAWS if len(shared) < len(cls.parameters) else 1
+    starts = []
+    for _ in range(draws):
+        values = cls.sample_prior(rng)
+        values.update({n: like.values[n] for n in shared})
+        starts.append(values)
+    return starts
 
 
 def _score(sampler, state: Trace, cls: ObjectClass, values) -> float:
@@ -86,49 +101,79 @@ def _score(sampler, state: Trace, cls: ObjectClass, values) -> float:
     return -math.inf if new is None else new.score
 
 
-def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject) -> dict[str, Any]:
-    """The deterministic fit of a ``cls`` object into ``state``, from ``like``'s values: each
-    categorical parameter set to its best value, then a pattern search over the continuous
-    ones (a step each way per parameter, halved when nothing improves), then the categorical
-    ones again."""
-    values = _start(cls, like)
-    best = _score(sampler, state, cls, values)
-    evaluations = 1
-    cont = [p for p in cls.parameters if p.continuous]
-    finite = [p for p in cls.parameters if isinstance(p.domain, Finite)]
+class _Search:
+    """The best values found so far, and each trial's score against them."""
 
-    def categorical(values, best, evaluations):
-        for p in finite:
-            for v in p.domain.values:
-                if v == values[p.name]:
-                    continue
-                trial = {**values, p.name: v}
-                s = _score(sampler, state, cls, trial)
-                evaluations += 1
-                if s > best:
-                    values, best = trial, s
-        return values, best, evaluations
+    def __init__(self, sampler, state: Trace, cls: ObjectClass, values, best: float) -> None:
+        self.sampler, self.state, self.cls = sampler, state, cls
+        self.values, self.best, self.evaluations = values, best, 0
 
-    values, best, evaluations = categorical(values, best, evaluations)
-    steps = {p.name: START_STEP * p.proposal_scale for p in cont}
-    halvings = 0
-    while cont and halvings <= HALVINGS and evaluations < MAX_EVALUATIONS:
+    def trial(self, name: str, value) -> bool:
+        trial = {**self.values, name: value}
+        s = _score(self.sampler, self.state, self.cls, trial)
+        self.evaluations += 1
+        if s > self.best:
+            self.values, self.best = trial, s
+            return True
+        return False
+
+    def categorical(self) -> None:
+        for p in self.cls.parameters:
+            if isinstance(p.domain, Finite):
+                for v in p.domain.values:
+                    if v != self.values[p.name]:
+                        self.trial(p.name, v)
+
+    def turns(self) -> bool:
         improved = False
-        for p in cont:
-            for sign in (1.0, -1.0):
-                trial = {**values, p.name: values[p.name] + sign * steps[p.name]}
-                s = _score(sampler, state, cls, trial)
-                evaluations += 1
-                if s > best:
-                    values, best, improved = trial, s, True
+        for p in self.cls.parameters:
+            if p.continuous and isinstance(p.domain, Periodic):
+                period = p.domain.high - p.domain.low
+                here = self.values[p.name]
+                for t in range(1, TURNS):
+                    improved |= self.trial(p.name, p.domain.wrap(here + t * period / TURNS))
+        return improved
+
+    def pattern(self) -> None:
+        cont = [p for p in self.cls.parameters if p.continuous]
+        steps = {p.name: START_STEP * p.proposal_scale for p in cont}
+        halvings = 0
+        while cont and halvings <= HALVINGS and self.evaluations < MAX_EVALUATIONS:
+            improved = False
+            for p in cont:
+                for sign in (1.0, -1.0):
+                    v = self.values[p.name] + sign * steps[p.name]
+                    if isinstance(p.domain, Periodic):
+                        v = p.domain.wrap(v)
+                    if self.trial(p.name, v):
+                        improved = True
+                        break
+                if self.evaluations >= MAX_EVALUATIONS:
                     break
-            if evaluations >= MAX_EVALUATIONS:
-                break
-        if not improved:
-            steps = {n: v / 2 for n, v in steps.items()}
-            halvings += 1
-    values, best, evaluations = categorical(values, best, evaluations)
-    return values
+            if not improved:
+                steps = {n: v / 2 for n, v in steps.items()}
+                halvings += 1
+
+
+def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None
+        ) -> dict[str, Any]:
+    """The deterministic fit of a ``cls`` object into ``state``, from ``like``'s values (those
+    named in ``keep``, if given): the best of the starts, each categorical parameter set to
+    its best value, each angle at its best of TURNS turns, then a pattern search over the
+    continuous parameters (a step each way per parameter, halved when nothing improves); the
+    turns and the search once more where the turns still improve the fit (the first ones were
+    tried at a size and place that were off), and the categorical parameters again."""
+    starts = _starts(cls, like, keep)
+    scores = [_score(sampler, state, cls, v) for v in starts]
+    best = max(scores)
+    search = _Search(sampler, state, cls, starts[scores.index(best)], best)
+    search.categorical()
+    search.turns()
+    search.pattern()
+    if search.turns():
+        search.pattern()
+    search.categorical()
+    return search.values
 
 
 def log_density(cls: ObjectClass, values, fitted) -> float:

@@ -67,10 +67,12 @@ def seed_log_probs(seeds: np.ndarray, obj: SceneObject) -> np.ndarray:
 
 def fit_at(sampler, state: Trace, cls: ObjectClass, seed) -> dict:
     """The deterministic fit of a ``cls`` object into ``state`` from the seed: the search of
-    ``sppl.infer.fit`` from a fixed draw of the class's prior moved to the seed."""
+    ``sppl.infer.fit`` from the seed, its other parameters from the best of fixed draws of
+    the class's prior."""
     start = cls.sample_prior(np.random.default_rng(0))
     start[cls.position[0]], start[cls.position[1]] = float(seed[0]), float(seed[1])
-    return fitting.fit(sampler, state, cls, make_object(sampler.model, cls, start))
+    return fitting.fit(sampler, state, cls, make_object(sampler.model, cls, start),
+                       keep=cls.position)
 
 
 @dataclass(frozen=True)
