@@ -252,7 +252,11 @@ def test_prior_recovery_with_a_region(false_alarm):
     unrestricted = UnrestrictedDraws(one.classes[0].restriction)
     wrong = dataclasses.replace(one, classes=(
         dataclasses.replace(one.classes[0], restriction=unrestricted),))
-    bad = verify.prior_recovery(wrong, sweeps=4000, seed=4, reference_draws=2000)
+    # These draws put objects outside the region, where both the old and the new object of a
+    # replace have density -inf: the ratio is -inf - -inf, NaN, which the sampler counts and
+    # rejects; numpy's warning about it says nothing the test does not know.
+    with np.errstate(invalid="ignore"):
+        bad = verify.prior_recovery(wrong, sweeps=4000, seed=4, reference_draws=2000)
     assert bad.row("count of block").p_value < 1e-4 and not bad.passed
 
 
