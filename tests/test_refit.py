@@ -166,8 +166,8 @@ def test_a_reverse_fit_left_undone_changes_no_decision(require_gl, root, monkeyp
     real = fit.refitted_back
     asked = {"made": 0, "computed": 0}
 
-    def counted(*args):
-        back, bound = real(*args)
+    def counted(*args, **kwargs):
+        back, bound = real(*args, **kwargs)
         asked["made"] += 1
 
         def computed():
@@ -186,8 +186,8 @@ def test_a_reverse_fit_left_undone_changes_no_decision(require_gl, root, monkeyp
                    if k[0] in ("refit", "merge", "split"))
     assert accepted > 0
 
-    def too_low(*args):
-        back, bound = real(*args)
+    def too_low(*args, **kwargs):
+        back, bound = real(*args, **kwargs)
         return back, bound - 1000.0
 
     monkeypatch.setattr(fit, "refitted_back", too_low)

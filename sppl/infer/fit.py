@@ -155,15 +155,16 @@ class _Search:
                 halvings += 1
 
 
-def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None
+def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None, also=()
         ) -> dict[str, Any]:
     """The deterministic fit of a ``cls`` object into ``state``, from ``like``'s values (those
-    named in ``keep``, if given): the best of the starts, each categorical parameter set to
+    named in ``keep``, if given) or those of the objects ``also`` (a merge's others, whose
+    pixels the fit takes over): the best of the starts, each categorical parameter set to
     its best value, each angle at its best of TURNS turns, then a pattern search over the
     continuous parameters (a step each way per parameter, halved when nothing improves); the
     turns and the search once more where the turns still improve the fit (the first ones were
     tried at a size and place that were off), and the categorical parameters again."""
-    starts = _starts(cls, like, keep)
+    starts = [v for o in (like, *also) for v in _starts(cls, o, keep)]
     scores = [_score(sampler, state, cls, v) for v in starts]
     best = max(scores)
     search = _Search(sampler, state, cls, starts[scores.index(best)], best)
@@ -226,12 +227,13 @@ def log_mixture_bound(sampler, state: Trace, cls: ObjectClass, values) -> float:
                               math.log(MIX) + sampler.birth.log_density(cls, values, state)))
 
 
-def refitted_back(sampler, state: Trace, old: SceneObject, new: SceneObject):
+def refitted_back(sampler, state: Trace, old: SceneObject, new: SceneObject, also=()):
     """The reverse density of a move that replaced ``old`` by the fitted ``new`` in
-    ``state``, log q_mixture(old | the fit of old's class from new), deferred: the function
-    that computes it (one more fit), and an upper bound of it (no fit needed)."""
+    ``state``, log q_mixture(old | the fit of old's class from new, and ``also``), deferred:
+    the function that computes it (one more fit), and an upper bound of it (no fit
+    needed)."""
     return (lambda: log_mixture(sampler, state, old.cls, old.values,
-                                fit(sampler, state, old.cls, new)),
+                                fit(sampler, state, old.cls, new, also=also)),
             log_mixture_bound(sampler, state, old.cls, old.values))
 
 

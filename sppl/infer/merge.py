@@ -5,25 +5,28 @@ A chain that explained a cube with two smaller cubes early on cannot leave that 
 object at a time: the death of either small cube uncovers half the cube's pixels and costs
 thousands of nats, and a refit of either is fitted with the other still there, so it fits the
 half that is left. A merge removes object i and refits object j in the scene without both,
-so the fit can grow j over the pixels i explained:
+so the fit can grow j over the pixels i explained (its search starts from the best of j's
+values and those of the objects taken away, as a fit of each class would start from them):
 
     merge (x- + i + j -> x- + y): i uniform among the n objects, j among the others with
         probability w(i, j) / sum_l w(i, l), where w(i, j) = exp(-|p_i - p_j|^2 / (2 R^2))
         with p an object's ground position, or exp(-g^2 / (2 P^2)) with g the pixels between
         the two objects' rectangles in the camera where they are nearest, whichever is larger
         (w = 1 where neither applies), and y from the refit proposal of a uniform class into
-        x- starting from j (sppl.infer.fit);
+        x- starting from j or i (sppl.infer.fit: the better start);
     split (x- + y -> x- + i + j): y uniform among the n - 1 objects, j from the refit proposal
         of a uniform class into x- = the scene without y, starting from y, and i a birth of a
         uniform class into x- (sppl.infer.birth: near what x- leaves unexplained, or the prior).
 
 A split is a merge's reverse: both go through the same x-, so the fits that the densities
-depend on are the same both ways, and with K classes
+depend on are the same both ways (the split's reverse fits y from its fitted j and its
+newborn i), and with K classes
 
     log alpha_merge = log pi(x- + y) - log pi(x- + i + j)
                       + log P(split) - log(n - 1) - log K + log q_fit(j | x-, y)
                       + log q_birth(i | x-)
-                      - log P(merge) + log n - log w(i, j) + log sum_l w(i, l) - log q_fit(y | x-, j)
+                      - log P(merge) + log n - log w(i, j) + log sum_l w(i, l)
+                      - log q_fit(y | x-, j, i)
 
 (the class choices: one K for y's, two for j's and i's). Which object is born and which is
 fitted are roles the move chooses, not part of the scene; a merge with its roles is undone by
@@ -142,13 +145,14 @@ def _without(objects, *places) -> tuple:
 
 
 def _refitted(sampler, state: Trace, like: SceneObject, rng: np.random.Generator,
-              target: SceneObject | None) -> tuple[SceneObject, dict]:
+              target: SceneObject | None, also=()) -> tuple[SceneObject, dict]:
     """A draw from the refit proposal of a uniform class into ``state``, starting from
-    ``like`` (or exactly ``target``), and the fit it is drawn around."""
+    ``like`` or the objects ``also`` (or exactly ``target``), and the fit it is drawn
+    around."""
     model = sampler.model
     cls = target.cls if target is not None else model.classes[
         int(rng.integers(len(model.classes)))]
-    forward = fitting.fit(sampler, state, cls, like)
+    forward = fitting.fit(sampler, state, cls, like, also=also)
     if target is None:
         target = make_object(model, cls, fitting.sample(sampler, state, cls, forward, rng))
     return target, forward
@@ -208,7 +212,7 @@ def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None
     gone, old = [objects[p] for p in taken], objects[j]
     rest = _without(objects, j, *taken)
     state = state if state is not None else sampler.make_trace(rest, trace.noise)
-    new, forward = _refitted(sampler, state, old, rng, target)
+    new, forward = _refitted(sampler, state, old, rng, target, also=gone)
     cls = new.cls
     merged = tuple(new if p == j else o for p, o in enumerate(objects) if p not in taken)
     tag = MergeSplit(state, j, taken)
@@ -279,6 +283,6 @@ def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None
     # log q(reverse), less the fitted density of old, which is deferred (Sampler.decide).
     log_q_back = (_log(sampler.jump["merge"]) - math.log(n) - math.log(taken_counts(n))
                   + chosen_log_prob(logw, logw_j, i, j, more) - math.log(n_classes))
-    back, bound = fitting.refitted_back(sampler, state, old, fitted)
+    back, bound = fitting.refitted_back(sampler, state, old, fitted, also=born)
     return Proposal("split", old.cls.name, split, trace.noise, (fitted, *born),
                     log_q_back - log_q_forward, tries=tag, deferred=back, deferred_bound=bound)
