@@ -33,8 +33,8 @@ fitted are roles the move chooses, not part of the scene; a merge with its roles
 exactly one split with the same roles, which is all detailed balance needs. The places in the
 tuple are uniform, as for a birth, and carry no density. docs/inference.md has the derivation.
 
-Three small objects on one large object's pixels need more: a merge of two of them fits the
-large object with the third still standing inside it, which the no-overlap constraint or the
+Three or more small objects on one large object's pixels need more: a merge of two of them
+fits the large object with the third still standing inside it, which the no-overlap constraint or the
 likelihood rejects. So a merge takes away m objects besides j, m uniform in 1..min(MAX_TAKEN,
 n - 1): i as above, then each further one among those not yet chosen with probability
 w(j, l) / sum over them, and a split gives m newborns (m uniform in 1..MAX_TAKEN), each a
@@ -63,10 +63,12 @@ from .moves import Proposal, _log
 RADIUS = 0.5
 PIXELS = 4.0
 # A merge takes away one to MAX_TAKEN objects besides the one it fits, and a split gives one
-# to MAX_TAKEN newborns: three small objects that share one large object's pixels become it
-# in one move, where two merges one after the other would each leave an object overlapping
-# the fit.
-MAX_TAKEN = 2
+# to MAX_TAKEN newborns: several small objects that share one large object's pixels become it
+# in one move, where merges one after the other would each leave an object overlapping the
+# fit. On shapes.scn's prior scenes, a wide flat cone ended as eight small blue objects
+# (scene 6 of benchmarks/prior_scenes.py), which a merge of all eight fits back into the cone
+# (4,108 nats above them); with at most three merged at once, no merge could.
+MAX_TAKEN = 8
 
 
 def partner_log_weights(objects, i: int, screen=None) -> np.ndarray:
