@@ -78,7 +78,8 @@ def observed_chain(tries: int, sweeps: int = 60, seed: int = 1):
 # again when the data-driven birth's thresholds changed (sppl/infer/birth.py): their births
 # use them; and all but prior1 when the fit started from the best of several prior draws and
 # tried an angle's turns (sppl/infer/fit.py): their refits, merges and fitted births use it;
-# and all four when a merge could take up to eight objects (sppl/infer/merge.py).
+# and all four when a merge could take up to twelve objects, fewer more often
+# (sppl/infer/merge.py).
 RECORDED = Path(__file__).parent / "fixtures" / "jump_chains.json"
 CHAINS = {"prior1": lambda: prior_chain(1), "prior3": lambda: prior_chain(3),
           "observed1": lambda: observed_chain(1), "observed3": lambda: observed_chain(3)}

@@ -35,11 +35,12 @@ tuple are uniform, as for a birth, and carry no density. docs/inference.md has t
 
 Three or more small objects on one large object's pixels need more: a merge of two of them
 fits the large object with the third still standing inside it, which the no-overlap constraint or the
-likelihood rejects. So a merge takes away m objects besides j, m uniform in 1..min(MAX_TAKEN,
-n - 1): i as above, then each further one among those not yet chosen with probability
-w(j, l) / sum over them, and a split gives m newborns (m uniform in 1..MAX_TAKEN), each a
-birth into the same x-. The ratio above gains, in the merge's density, 1 / min(MAX_TAKEN,
-n - 1) and each further choice's probability, and in the split's 1 / MAX_TAKEN, one K and one
+likelihood rejects. So a merge takes away m objects besides j, m in 1..M = min(MAX_TAKEN,
+n - 1) with probability c_M(m) = (1 / m) / sum_{l <= M} 1 / l: i as above, then each further
+one among those not yet chosen with probability w(j, l) / sum over them, and a split gives m
+newborns (m with probability c_MAX_TAKEN(m)), each a birth into the same x-. The ratio above
+gains, in the merge's density, c_M(m) and each further choice's probability, and in the
+split's c_MAX_TAKEN(m), one K and one
 q_birth per newborn; the newborns in the order drawn are the merged-away objects in the
 order chosen.
 """
@@ -67,8 +68,9 @@ PIXELS = 4.0
 # in one move, where merges one after the other would each leave an object overlapping the
 # fit. On shapes.scn's prior scenes, a wide flat cone ended as eight small blue objects
 # (scene 6 of benchmarks/prior_scenes.py), which a merge of all eight fits back into the cone
-# (4,108 nats above them); with at most three merged at once, no merge could.
-MAX_TAKEN = 8
+# (4,108 nats above them), and a red cone as nine small red objects (scene 1: +1,646 nats for
+# all nine, -709 for seven of them); with at most three merged at once, no merge could.
+MAX_TAKEN = 12
 
 
 def partner_log_weights(objects, i: int, screen=None) -> np.ndarray:
@@ -161,9 +163,22 @@ def _refitted(sampler, state: Trace, like: SceneObject, rng: np.random.Generator
 
 
 def taken_counts(n: int) -> int:
-    """How many numbers of merged-away objects a merge of ``n`` objects chooses among
-    (uniformly): 1 to MAX_TAKEN, and at most n - 1."""
+    """How many numbers of merged-away objects a merge of ``n`` objects chooses among: 1 to
+    MAX_TAKEN, and at most n - 1."""
     return min(MAX_TAKEN, n - 1)
+
+
+def count_log_prob(m: int, top: int) -> float:
+    """log c_top(m): m objects taken away (or born) out of 1..top, with probability
+    proportional to 1 / m. Most merges and splits are of one or two objects; a uniform
+    choice up to MAX_TAKEN made a split into one object as rare as one into twelve, which is
+    never accepted."""
+    return -math.log(m) - math.log(sum(1.0 / k for k in range(1, top + 1)))
+
+
+def draw_count(rng: np.random.Generator, top: int) -> int:
+    p = 1.0 / np.arange(1, top + 1)
+    return 1 + int(rng.choice(top, p=p / p.sum()))
 
 
 def more_log_probs(logw_j: np.ndarray, excluded) -> np.ndarray:
@@ -188,9 +203,10 @@ def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None
                   j: int | None = None, state: Trace | None = None,
                   target: SceneObject | None = None, more: tuple[int, ...] | None = None
                   ) -> Proposal | None:
-    """Merge object i (uniform), and with it MORE - 1 further objects near j (MORE uniform in
-    1..``taken_counts``), into object j (near i) as a fitted object of a uniform class; given
-    ``target`` (and ``more``), the proposal of exactly that object (a split's reverse)."""
+    """Merge object i (uniform), and with it MORE - 1 further objects near j (MORE in
+    1..``taken_counts``, ``draw_count``), into object j (near i) as a fitted object of a
+    uniform class; given ``target`` (and ``more``), the proposal of exactly that object (a
+    split's reverse)."""
     objects = trace.objects
     n = len(objects)
     if n < 2:
@@ -204,7 +220,7 @@ def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None
         j = int(rng.choice(n, p=np.exp(logw)))
     logw_j = partner_log_weights(objects, j, screen)
     if more is None:
-        count = 1 + int(rng.integers(taken_counts(n)))
+        count = draw_count(rng, taken_counts(n))
         more = []
         for _ in range(count - 1):
             p = np.exp(more_log_probs(logw_j, [i, *more]))
@@ -221,11 +237,13 @@ def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None
     if not math.isfinite(new.log_prior):
         return Proposal("merge", old.cls.name, merged, trace.noise, (new,), -math.inf, tries=tag)
     log_q_forward = (_log(sampler.jump["merge"]) - math.log(n)
-                     - math.log(taken_counts(n)) + chosen_log_prob(logw, logw_j, i, j, more)
+                     + count_log_prob(len(taken), taken_counts(n))
+                     + chosen_log_prob(logw, logw_j, i, j, more)
                      - math.log(n_classes)
                      + fitting.log_mixture(sampler, state, cls, new.values, forward))
     # log q(reverse), less the fitted density of old, which is deferred (Sampler.decide).
-    log_q_back = (_log(sampler.jump["split"]) - math.log(len(merged)) - math.log(MAX_TAKEN)
+    log_q_back = (_log(sampler.jump["split"]) - math.log(len(merged))
+                  + count_log_prob(len(taken), MAX_TAKEN)
                   - (1 + len(taken)) * math.log(n_classes)
                   + sum(log_q_born(sampler, o, state) for o in gone))
     back, bound = fitting.refitted_back(sampler, state, old, new)
@@ -238,7 +256,7 @@ def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None
                   born: tuple[SceneObject, ...] | None = None,
                   born_places: tuple[int, ...] | None = None) -> Proposal | None:
     """Split object k (uniform) into a fitted object of a uniform class in its place and
-    MORE births of uniform classes (MORE uniform in 1..MAX_TAKEN); given ``fitted``,
+    MORE births of uniform classes (MORE in 1..MAX_TAKEN, ``draw_count``); given ``fitted``,
     ``born`` and ``born_places`` (their places in the split tuple), the proposal of exactly
     those (a merge's reverse)."""
     objects = trace.objects
@@ -255,7 +273,7 @@ def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None
     replaced = objects[:k] + (fitted,) + objects[k + 1 :]
     if born is None:
         born, split = [], list(replaced)
-        for _ in range(1 + int(rng.integers(MAX_TAKEN))):
+        for _ in range(draw_count(rng, MAX_TAKEN)):
             cls = model.classes[int(rng.integers(n_classes))]
             obj = make_object(model, cls, sampler.birth.sample(cls, state, rng))
             born.append(obj)
@@ -274,7 +292,8 @@ def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None
         return Proposal("split", old.cls.name, split, trace.noise, (fitted, *born), -math.inf,
                         tries=tag)
     n = len(split)
-    log_q_forward = (_log(sampler.jump["split"]) - math.log(m) - math.log(MAX_TAKEN)
+    log_q_forward = (_log(sampler.jump["split"]) - math.log(m)
+                     + count_log_prob(len(born), MAX_TAKEN)
                      - (1 + len(born)) * math.log(n_classes)
                      + fitting.log_mixture(sampler, state, fitted.cls, fitted.values, forward)
                      + sum(log_q_born(sampler, b, state) for b in born))
@@ -283,7 +302,8 @@ def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None
     logw = partner_log_weights(split, i, screen)
     logw_j = partner_log_weights(split, j, screen)
     # log q(reverse), less the fitted density of old, which is deferred (Sampler.decide).
-    log_q_back = (_log(sampler.jump["merge"]) - math.log(n) - math.log(taken_counts(n))
+    log_q_back = (_log(sampler.jump["merge"]) - math.log(n)
+                  + count_log_prob(len(born), taken_counts(n))
                   + chosen_log_prob(logw, logw_j, i, j, more) - math.log(n_classes))
     back, bound = fitting.refitted_back(sampler, state, old, fitted, also=born)
     return Proposal("split", old.cls.name, split, trace.noise, (fitted, *born),
