@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 import pytest
-from toys import gaussian_shapes
+from toys import gaussian_model
 
 from sppl.data.camera import Camera, focal_from_fov, look_at
 from sppl.data.observations import CameraSpec, Observations
@@ -76,10 +76,9 @@ SPECS = [
 
 
 def _setting(root, model_name, seed=0):
-    # These tests hold the Gaussian fast path against its reference: shapes.scn's depth
+    # These tests hold the Gaussian fast path against its reference: the shipped models' depth
     # mixture is replaced by a Gaussian (the mixture's twin tests are in tests/test_robust.py).
-    model = (gaussian_shapes(root) if model_name == "shapes.scn"
-             else load_model(root / "models" / model_name))
+    model = gaussian_model(root, model_name)
     renderer = Renderer(model.render)
     rng = np.random.default_rng(seed)
     truth = sample_objects(model, rng)

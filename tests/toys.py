@@ -89,20 +89,28 @@ def prior_sampler(model: Model, seed: int) -> Sampler:
 _GAUSSIAN_MODELS: dict = {}
 
 
-def gaussian_shapes(root):
-    """models/shapes.scn with a Gaussian depth sensor, loaded from a copy also named
-    shapes.scn: for the tests that hold the Gaussian fast path against its reference on the
-    shipped model (its depth mixture has twin tests of its own, tests/test_robust.py)."""
+def gaussian_model(root, name):
+    """models/NAME with its depth mixture replaced by a Gaussian, loaded from a copy of the
+    same name (beside a link to the shipped meshes): for the tests that hold the Gaussian fast
+    path against its reference on a shipped model (the mixture has twin tests of its own,
+    tests/test_robust.py)."""
     import tempfile
     from pathlib import Path
 
     from sppl.lang import load_model
 
-    if "shapes" not in _GAUSSIAN_MODELS:
-        text = (Path(root) / "models" / "shapes.scn").read_text()
-        copy = Path(tempfile.mkdtemp(prefix="sppl-gaussian-")) / "shapes.scn"
-        copy.write_text(text.replace("likelihood mixture(outlier=0.01)", "likelihood gaussian"))
-        _GAUSSIAN_MODELS["shapes"] = load_model(copy)
-    model = _GAUSSIAN_MODELS["shapes"]
-    assert model.sensors["depth"].likelihood == "gaussian"
+    if name not in _GAUSSIAN_MODELS:
+        models = Path(root) / "models"
+        text = (models / name).read_text()
+        folder = Path(tempfile.mkdtemp(prefix="sppl-gaussian-"))
+        (folder / "meshes").symlink_to(models / "meshes", target_is_directory=True)
+        (folder / name).write_text(text.replace("likelihood mixture(outlier=0.01)",
+                                                "likelihood gaussian"))
+        _GAUSSIAN_MODELS[name] = load_model(folder / name)
+    model = _GAUSSIAN_MODELS[name]
+    assert all(s.likelihood == "gaussian" for s in model.sensors.values())
     return model
+
+
+def gaussian_shapes(root):
+    return gaussian_model(root, "shapes.scn")
