@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import copy
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -76,9 +77,11 @@ SPECS = [
 
 
 def _setting(root, model_name, seed=0):
-    # These tests hold the Gaussian fast path against its reference: the shipped models' depth
-    # mixture is replaced by a Gaussian (the mixture's twin tests are in tests/test_robust.py).
-    model = gaussian_model(root, model_name)
+    # These tests hold the Gaussian fast path against its reference: a shipped model's depth
+    # mixture is replaced by a Gaussian (the mixture's twin tests are in tests/test_robust.py,
+    # which passes its own fixture models by path, loaded as they are).
+    model = (load_model(model_name) if Path(model_name).is_absolute()
+             else gaussian_model(root, model_name))
     renderer = Renderer(model.render)
     rng = np.random.default_rng(seed)
     truth = sample_objects(model, rng)
