@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import copy
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -78,10 +77,13 @@ SPECS = [
 
 def _setting(root, model_name, seed=0):
     # These tests hold the Gaussian fast path against its reference: a shipped model's depth
-    # mixture is replaced by a Gaussian (the mixture's twin tests are in tests/test_robust.py,
-    # which passes its own fixture models by path, loaded as they are).
-    model = (load_model(model_name) if Path(model_name).is_absolute()
-             else gaussian_model(root, model_name))
+    # mixture is replaced by a Gaussian (the mixture's twin tests are in tests/test_robust.py).
+    return setting_of(root, gaussian_model(root, model_name), seed)
+
+
+def setting_of(root, model, seed=0):
+    """``model``'s renderer, a scene drawn from its prior, and its observations by SPECS's
+    cameras with missing depth."""
     renderer = Renderer(model.render)
     rng = np.random.default_rng(seed)
     truth = sample_objects(model, rng)

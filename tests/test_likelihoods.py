@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 from scipy import stats
-from toys import gaussian_shapes
+from toys import gaussian_model
 
 from sppl.data.observations import load_observations
 from sppl.errors import SpplError
@@ -63,7 +63,7 @@ def test_scorer_equals_reference_scoring_on_the_example(root, require_gl):
     """The fast path (GL render, cached statistics) against numpy/scipy scoring of the same
     renders, on the shipped example's true scene, with Gaussian likelihoods on both sensors
     (the shipped model's depth mixture has its own twin tests, tests/test_robust.py)."""
-    model = gaussian_shapes(root)
+    model = gaussian_model(root, "shapes.scn")
     obs = load_observations(root / "examples" / "three_shapes" / "obs")
     truth = json.loads((root / "examples" / "three_shapes" / "scene.json").read_text())
     objects = objects_from_dict(model, truth)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from false_alarms import EACH
 from test_verify import seen_world
-from toys import ball_class, block_class, gaussian_shapes, toy_model
+from toys import ball_class, block_class, gaussian_model, toy_model
 
 from sppl import verify
 from sppl.infer import fit
@@ -136,7 +136,7 @@ def _shapes_chain(root, sampler_class, sweeps=240):
     from sppl.render import Renderer
     from sppl.scoring.scorer import Scorer
 
-    model = gaussian_shapes(root)
+    model = gaussian_model(root, "shapes.scn")
     # The jumps whose reverse fits are deferred, without fitted births and deaths (whose
     # deferral is the same code), as this chain was first checked with.
     weights = {**model.inference.jump_weights, "fitted_birth": 0.0, "fitted_death": 0.0}

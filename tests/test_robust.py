@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from false_alarms import EACH, SLOW_EACH
 from scipy import stats
-from test_fast_scoring import _setting as fast_setting
+from test_fast_scoring import setting_of
 
 from sppl import cli, verify
 from sppl.data.observations import load_observations
@@ -211,7 +211,7 @@ def test_missing_returns_are_sampled_by_what_the_render_shows():
 
 def _setting(root, name):
     """tests/test_fast_scoring.py's three cameras and missing depth, for a fixture model."""
-    return fast_setting(root, FIXTURES / name)
+    return setting_of(root, load_model(FIXTURES / name))
 
 
 def _agree(fast_stats, ref_stats, scorer, noise):

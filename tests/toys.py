@@ -110,7 +110,3 @@ def gaussian_model(root, name):
     model = _GAUSSIAN_MODELS[name]
     assert all(s.likelihood == "gaussian" for s in model.sensors.values())
     return model
-
-
-def gaussian_shapes(root):
-    return gaussian_model(root, "shapes.scn")
