@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import sys
 import tempfile
@@ -180,6 +181,93 @@ def solve(model, obs, right, seed, steps, limit, check_every, full=False,
     state["map"] = result.summary["map"]
     state["noise"] = result.summary["noise"]  # posterior means and sds after burn-in
     return state
+
+
+def run_leader(scores, rights) -> int | None:
+    """The chain whose MAP a run of several chains reports (the highest log joint, as
+    ``sppl sample --chains`` does), or None before any chain has checked one."""
+    checked = [k for k, s in enumerate(scores) if s != -math.inf]
+    return max(checked, key=lambda k: scores[k]) if checked else None
+
+
+def _run_chain_of(model_path, obs, right, index, seed, steps, limit, check_every, shared,
+                  results) -> None:
+    """Chain ``index`` of a run of several, in its own process (and so its own GL context
+    and CPU clock). After each MAP check it posts its MAP's log joint and whether it is right
+    to ``shared``; the run is solved, and every chain stops, at the first check where the
+    run's MAP (``run_leader``) is right."""
+    scores, rights, solved = shared
+    model = load_model(model_path)
+    state = {"seconds": None, "errors": None, "last_best": None}
+    t0 = time.process_time()
+
+    def check(step, trace, best, sampler):
+        elapsed = time.process_time() - t0
+        if solved.value:
+            return True
+        if step % check_every and step != steps:
+            return elapsed > limit
+        if best is not state["last_best"]:
+            state["last_best"] = best
+            pruned = [o.as_dict() for o in sampler.prune(best).objects]
+            state["errors"] = right.errors(pruned)
+            with solved.get_lock():
+                scores[index], rights[index] = best.score, right(pruned)
+                leader = run_leader(scores[:], rights[:])
+                if not solved.value and leader is not None and rights[leader]:
+                    solved.value = 1
+                    state["seconds"] = elapsed
+                    return True
+        return elapsed > limit
+
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            result = run_chain(model, obs, Path(tmp), steps=steps, seed=seed, progress=False,
+                               callback=check)
+        results.put((index, {"seconds": state["seconds"], "errors": state["errors"],
+                             "steps_run": result.summary["steps_done"],
+                             "map": result.summary["map"],
+                             "total_seconds": time.process_time() - t0}))
+    except BaseException as e:  # the parent must hear of it, or it waits for ever
+        results.put((index, {"failed": f"{type(e).__name__}: {e}"}))
+        raise
+
+
+def solve_run(model_path, obs, right, seed, chains, steps, limit, check_every) -> dict:
+    """A run of ``chains`` chains, each in its own process with the seeds ``sppl sample
+    --chains`` gives them, each stopping after ``limit`` CPU seconds of its own. The run is
+    solved at the first MAP check, in any chain, after which the run's MAP (the best of the
+    chains' MAPs, ``run_leader``) is right: a right chain below another chain's more probable
+    wrong MAP does not count. Seconds are the CPU seconds of the chain whose check solved the
+    run; on a machine with a core per chain they are also the run's wall time."""
+    import multiprocessing as mp
+
+    from sppl.runs.run import chain_seeds
+
+    ctx = mp.get_context("spawn")
+    shared = (ctx.Array("d", [-math.inf] * chains, lock=False),
+              ctx.Array("b", [0] * chains, lock=False), ctx.Value("b", 0))
+    results = ctx.Queue()
+    procs = [ctx.Process(target=_run_chain_of,
+                         args=(str(model_path), obs, right, k, s, steps, limit, check_every,
+                               shared, results))
+             for k, s in enumerate(chain_seeds(seed, chains))]
+    for p in procs:
+        p.start()
+    got = dict(results.get() for _ in procs)
+    for p in procs:
+        p.join()
+    failed = [f"chain {k}: {r['failed']}" for k, r in sorted(got.items()) if "failed" in r]
+    if failed:
+        raise RuntimeError("; ".join(failed))
+    runs = [got[k] for k in range(chains)]
+    solver = next((r for r in runs if r["seconds"] is not None), None)
+    best = solver or max(runs, key=lambda r: r["map"]["score"])
+    return {"solved_at": None if solver is None else solver["steps_run"],
+            "seconds": None if solver is None else solver["seconds"],
+            "errors": best["errors"], "map": best["map"],
+            "steps_run": sum(r["steps_run"] for r in runs),
+            "total_seconds": max(r["total_seconds"] for r in runs)}
 
 
 def main(argv=None) -> int:
