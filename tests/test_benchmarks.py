@@ -77,6 +77,32 @@ def test_prior_scenes_benchmark_runs_and_draws_scenes_in_view(root, require_gl, 
     assert scenes == prior_scenes.scenes_of("blocks", 6, prior_scenes.SEED)  # a fixed seed
 
 
+def test_prior_scenes_runs_several_chains_and_reports_the_best_of_their_maps(root, require_gl,
+                                                                             tmp_path):
+    """--chains 2: each scene is a run of two chains in their own processes, and the run is
+    solved only when its MAP, the more probable of the two chains' MAPs, is right: a right
+    chain below a more probable wrong one does not solve it."""
+    import json
+    import math
+
+    run = tmp_path / "run.json"
+    out = bench(root, "prior_scenes.py", "--models", "shapes", "--scenes", "1", "--limit", "2",
+                "--check-every", "20", "--chains", "2", "--json", run)
+    assert "a run of 2 chains each" in out and "| shapes | " in out
+    (row,) = json.loads(run.read_text())
+    assert row["chains"] == 2 and row["steps"] > 0 and "score" in row["map"]
+
+    sys.path.insert(0, str(root / "benchmarks"))
+    try:
+        from time_to_solution import run_leader
+    finally:
+        sys.path.remove(str(root / "benchmarks"))
+    assert run_leader([-math.inf, -math.inf], [0, 0]) is None
+    assert run_leader([-math.inf, -50.0], [0, 1]) == 1
+    assert run_leader([-40.0, -50.0], [0, 1]) == 0  # the right chain is not the run's MAP
+    assert run_leader([-60.0, -50.0], [0, 1]) == 1
+
+
 def test_blocks_appearance_reads_cycles_renders_better_than_the_old_one(root, require_gl):
     """calibrate.py's check, under blocks.scn's own image likelihood: with its shipped material
     factors and lighting, fewer of the test bed's objects have their true (material, colour)
