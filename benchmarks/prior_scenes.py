@@ -40,7 +40,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
 
 from scenes_in_view import draw_in_view
-from time_to_solution import Check, solve, solve_run
+from time_to_solution import Check, observed_check, solve, solve_run
 
 from sppl.data.observations import load_cameras, load_observations
 from sppl.infer.chain import Sampler
@@ -91,9 +91,11 @@ def run_model(name: str, model_path: Path, args, work: Path) -> list[dict]:
         truth_objects, truth_noise = load_scene(model, obs_path / "scene.json")
         tolerance = TOLERANCE.get(name, args.tolerance)
         right = Check(scene["objects"], tolerance)
+        observed = None
         if args.chains == 1:
+            observed = observed_check(model, obs, obs_path / "scene.json", tolerance)
             r = solve(model, obs, right, args.chain_seed, args.steps, args.limit,
-                      args.check_every, clock=time.process_time)
+                      args.check_every, clock=time.process_time, observed=observed)
         else:
             r = solve_run(model_path, obs, right, args.chain_seed, args.chains, args.steps,
                           args.limit, args.check_every)
@@ -107,12 +109,20 @@ def run_model(name: str, model_path: Path, args, work: Path) -> list[dict]:
                "map_objects": e.n_estimated, "wrong_class": e.wrong_class,
                "wrong_category": e.wrong_category, "gap": gap, "truth": scene,
                "map": r["map"]}
+        if observed is not None:
+            row.update(observed=r["observed_at"] is not None,
+                       observed_seconds=r["observed_seconds"],
+                       unobserved={"objects": sorted(observed.droppable),
+                                   "values": {f"{k}.{n}": sorted(v)
+                                              for (k, n), v in observed.free.items() if v}})
         rows.append(row)
         seconds = f"{r['seconds']:.1f}" if solved else "-"
+        seen = "" if observed is None else " {:>8}".format(
+            f"{r['observed_seconds']:.1f}" if row["observed"] else "-")
         print(f"{name:12s} {i:>3} {len(scene['objects']):>7} {('yes' if solved else 'no'):>6} "
               f"{seconds:>8} {r['steps_run']:>6} "
               f"{f'{e.n_estimated}/{e.n_true}':>6} {e.wrong_class:>5} {e.wrong_category:>5} "
-              f"{gap:>+12,.0f}", flush=True)
+              f"{gap:>+12,.0f}{seen}", flush=True)
     return rows
 
 
@@ -124,17 +134,24 @@ def _scene_file(work: Path, best: dict) -> Path:
 
 def totals(rows: list[dict], limit: float) -> str:
     lines = ["| model | solved | median s | worst s | MAP - truth, median (unsolved) | "
-             "unsolved, MAP at or above the truth |",
-             "|---|---:|---:|---:|---:|---:|"]
+             "unsolved, MAP at or above the truth | solved as far as the observations tell |",
+             "|---|---:|---:|---:|---:|---:|---:|"]
     for name in dict.fromkeys(r["model"] for r in rows):
         mine = [r for r in rows if r["model"] == name]
         secs = sorted(r["seconds"] if r["solved"] else float("inf") for r in mine)
         fmt = lambda v: f"{v:.1f}" if v != float("inf") else f"> {limit:.0f}"
         gaps = [r["gap"] for r in mine if not r["solved"]]
         gap = f"{statistics.median(gaps):+,.0f}" if gaps else "-"
+        if all("observed" in r for r in mine):
+            seen = sorted(r["observed_seconds"] if r["observed"] else float("inf")
+                          for r in mine)
+            observed = (f"{sum(r['observed'] for r in mine)}/{len(mine)}, median "
+                        f"{fmt(statistics.median(seen))}")
+        else:
+            observed = "-"
         lines.append(f"| {name} | {sum(r['solved'] for r in mine)}/{len(mine)} | "
                      f"{fmt(statistics.median(secs))} | {fmt(secs[-1])} | {gap} | "
-                     f"{sum(g >= 0 for g in gaps)} |")
+                     f"{sum(g >= 0 for g in gaps)} | {observed} |")
     return "\n".join(lines)
 
 
@@ -167,7 +184,8 @@ def main(argv=None) -> int:
           f"{args.chain_seed}), at most {args.limit:.0f} CPU s per chain; MAP - truth: log "
           "joint, nats")
     print(f"{'model':12s} {'#':>3} {'objects':>7} {'solved':>6} {'seconds':>8} {'steps':>6} "
-          f"{'count':>6} {'class':>5} {'categ':>5} {'MAP - truth':>12}")
+          f"{'count':>6} {'class':>5} {'categ':>5} {'MAP - truth':>12}"
+          + (f" {'observed':>8}" if args.chains == 1 else ""))
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.models:
