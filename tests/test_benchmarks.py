@@ -77,6 +77,16 @@ def test_prior_scenes_benchmark_runs_and_draws_scenes_in_view(root, require_gl, 
     assert scenes == prior_scenes.scenes_of("blocks", 6, prior_scenes.SEED)  # a fixed seed
 
 
+def _benchmarks(root):
+    sys.path.insert(0, str(root / "benchmarks"))
+    try:
+        import prior_scenes
+        import time_to_solution
+    finally:
+        sys.path.remove(str(root / "benchmarks"))
+    return prior_scenes, time_to_solution
+
+
 def test_prior_scenes_runs_several_chains_and_reports_the_best_of_their_maps(root, require_gl,
                                                                              tmp_path):
     """--chains 2: each scene is a run of two chains in their own processes, and the run is
@@ -92,15 +102,56 @@ def test_prior_scenes_runs_several_chains_and_reports_the_best_of_their_maps(roo
     (row,) = json.loads(run.read_text())
     assert row["chains"] == 2 and row["steps"] > 0 and "score" in row["map"]
 
-    sys.path.insert(0, str(root / "benchmarks"))
-    try:
-        from time_to_solution import run_leader
-    finally:
-        sys.path.remove(str(root / "benchmarks"))
+    run_leader = _benchmarks(root)[1].run_leader
     assert run_leader([-math.inf, -math.inf], [0, 0]) is None
     assert run_leader([-math.inf, -50.0], [0, 1]) == 1
     assert run_leader([-40.0, -50.0], [0, 1]) == 0  # the right chain is not the run's MAP
     assert run_leader([-60.0, -50.0], [0, 1]) == 1
+
+
+def test_observed_check_asks_only_what_the_observations_tell(root):
+    """ObservedCheck: a droppable true object may be missing but, when an estimated object
+    stands for it, must be of its class; a free value may differ, any other may not; an
+    extra object is wrong; and with nothing droppable or free it is the plain Check."""
+    _, tts = _benchmarks(root)
+    cube = {"class": "cube", "params": {"x": 0.0, "y": 0.0, "a": 0.1, "s": 0.5, "c": "red"}}
+    ball = {"class": "sphere", "params": {"x": 1.0, "y": 1.0, "r": 0.02, "c": "blue"}}
+    far = {"class": "sphere", "params": {"x": -2.0, "y": 2.0, "r": 0.3, "c": "red"}}
+    recolour = lambda o, c: {**o, "params": {**o["params"], "c": c}}  # noqa: E731
+    check = tts.ObservedCheck([cube, ball], 0.15, {1}, {(0, "c"): {"green"}})
+    assert check([cube, ball]) and check([cube]) and check([recolour(cube, "green")])
+    assert check([recolour(cube, "green"), recolour(ball, "red")]) is False  # 1.c is not free
+    assert check([recolour(cube, "blue")]) is False
+    assert check([cube, {**ball, "class": "cube"}]) is False
+    assert check([cube, far]) is False and check([cube, ball, far]) is False
+    strict = tts.ObservedCheck([cube, ball], 0.15, set(), {})
+    plain = tts.Check([cube, ball], 0.15)
+    for estimate in ([cube, ball], [cube], [recolour(cube, "green"), ball], [ball, cube]):
+        assert strict(estimate) == plain(estimate)
+
+
+def test_observed_check_frees_the_colours_no_image_shows(root, require_gl, tmp_path):
+    """Scene 4 of shapes.scn's benchmark: its small blue cube and small green sphere stand
+    behind the large red cube as the one RGB camera sees it, so only the depth camera sees
+    them, and their colours are free; every other colour, and every object, is asked for."""
+    import json
+
+    from sppl.data.observations import load_observations
+    from sppl.lang import load_model
+    from sppl.runs.experiment import simulate
+
+    prior_scenes, tts = _benchmarks(root)
+    scene = prior_scenes.scenes_of("shapes", 5, prior_scenes.SEED)[4]
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(scene))
+    obs_path = simulate(root / "models" / "shapes.scn",
+                        root / "examples" / "models" / "shapes" / "cameras.json", path,
+                        tmp_path / "obs", seed=prior_scenes.SEED + 4)
+    check = tts.observed_check(load_model(root / "models" / "shapes.scn"),
+                               load_observations(obs_path), obs_path / "scene.json", 0.15)
+    assert check.droppable == frozenset()
+    free = {k: v for k, v in check.free.items() if v}
+    assert free == {(1, "c"): {"green", "red"}, (4, "c"): {"blue", "red"}}, free
 
 
 def test_blocks_appearance_reads_cycles_renders_better_than_the_old_one(root, require_gl):
