@@ -46,6 +46,44 @@ def test_seeds_sit_on_the_missing_objects(setting):  # noqa: F811
     assert len(sampler.birth.seeds(full)) == 0
 
 
+def test_an_object_a_pixel_across_seeds_a_birth(root, require_gl, tmp_path, monkeypatch):
+    """A blue sphere 4 cm across, 4 m from a 96x96 camera, covers a pixel, which leaves no
+    blob: its pixel, far off the floor's colour, is a speck that seeds a fitted birth on it.
+    With every object in place the sensor noise seeds nothing; and without specks (the
+    threshold out of reach) nothing seeds the sphere."""
+    import json
+
+    from sppl.data.observations import load_observations
+    from sppl.infer import birth
+    from sppl.lang import load_model
+    from sppl.model.simulate import load_scene
+    from sppl.render import Renderer
+    from sppl.runs.experiment import simulate
+    from sppl.scoring.scorer import Scorer
+
+    scene = {"objects": [
+        {"class": "cube", "params": {"x": -0.14, "y": -0.08, "a": -0.17, "s": 0.77, "c": "red"}},
+        {"class": "sphere", "params": {"x": -0.128, "y": -1.022, "r": 0.02, "c": "blue"}}],
+        "noise": {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}}}
+    (tmp_path / "scene.json").write_text(json.dumps(scene))
+    path = root / "models" / "shapes.scn"
+    obs_path = simulate(path, root / "examples" / "models" / "shapes" / "cameras.json",
+                        tmp_path / "scene.json", tmp_path / "obs", seed=2028)
+    model = load_model(path)
+    objects, noise = load_scene(model, obs_path / "scene.json")
+
+    def seeds(state_objects):
+        sampler = Sampler(model, Scorer(model, load_observations(obs_path),
+                                        Renderer(model.render)), np.random.default_rng(0))
+        return sampler.birth.seeds(sampler.make_trace(state_objects, noise))
+
+    found = seeds(objects[:1])
+    assert len(found) == 1 and np.hypot(*(found[0] - (-0.128, -1.022))) < 0.1, found
+    assert len(seeds(objects)) == 0
+    monkeypatch.setattr(birth, "STRONG_COLOUR_GAP", math.inf)
+    assert len(seeds(objects[:1])) == 0
+
+
 def test_a_fitted_birth_finds_the_missing_object(setting):  # noqa: F811
     """With the blue sphere missing, fitted births propose it: of 12, several have the right
     class and colour within 0.1 m, and such a proposal is accepted."""

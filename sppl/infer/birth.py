@@ -38,12 +38,21 @@ DEPTH_GAP = 0.05
 # An RGB pixel is unexplained when its mean absolute colour difference exceeds this: a red
 # mug on a wooden table differs from it by 0.12 to 0.2.
 COLOUR_GAP = 0.1
+# An object a pixel or two across (a sphere 4 cm wide, 4 m from a 96x96 camera) leaves no
+# blob, but a coloured object on a grey floor differs from it by 0.25 to 0.4, where the
+# sensor noise of a right scene (0.05 a channel) leaves no pixel above 0.2: a speck of
+# unexplained RGB pixels too small to seed, apart from every larger blob, is kept whole, and
+# seeds, when one of its pixels is this far off, or STRONG_SIGMAS times the image's noise
+# where that is more (a mean of three absolute Gaussian deviates passes 4 sigma about once
+# in ten million pixels).
+STRONG_COLOUR_GAP = 0.2
+STRONG_SIGMAS = 4.0
 # At most this many points describe a state (an even stride over the unexplained pixels), so
 # that the density costs microseconds.
 MAX_POINTS = 400
-# A blob of unexplained pixels seeds a fitted birth when it has this many pixels, and a state
-# has at most this many seeds (its largest blobs), so that a fitted death's choice among them
-# stays a short list.
+# A blob of unexplained pixels seeds a fitted birth when it has this many pixels or holds a
+# pixel STRONG_COLOUR_GAP off, and a state has at most this many seeds (its largest blobs),
+# so that a fitted death's choice among them stays a short list.
 SEED_PIXELS = 4
 MAX_SEEDS = 8
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -63,6 +72,9 @@ class BirthProposal:
         self.depth_gaps = {t.frame: max(DEPTH_GAP, 2.0 * depth_noise(t.observed, t.valid,
                                                                       t.camera.depth_max))
                            for t in self.terms if t.kind == "depth"}
+        self.strong_gaps = {t.frame: max(STRONG_COLOUR_GAP,
+                                         STRONG_SIGMAS * image_noise(t.observed))
+                            for t in self.terms if t.kind == "image"}
         # Per camera: world ray directions, the ray-to-axis factor, and the centre.
         self.rays = {
             t.frame: (t.camera.ray_directions(), t.camera.ray_to_z(), t.camera.position)
@@ -77,18 +89,18 @@ class BirthProposal:
         return _cached(trace, "birth_points", self._points)
 
     def _points(self, renders) -> np.ndarray:
-        found = [pts for _, pts in self._unexplained(renders)]
+        found = [pts for _, pts, _ in self._unexplained(renders)]
         pts = np.concatenate(found) if found else np.empty((0, 2))
         if len(pts) > MAX_POINTS:
             pts = pts[:: math.ceil(len(pts) / MAX_POINTS)]
         return pts
 
     def _unexplained(self, renders):
-        """Per camera term, the labelled blobs of pixels the render leaves unexplained and
-        the ground points (x, y) of those pixels, in the order ``labels[labels > 0]`` reads
-        them: a depth pixel back-projected with its measured depth, an RGB pixel's ray
-        followed down to the height objects stand on (an RGB pixel whose ray never gets
-        there is dropped, label and all)."""
+        """Per camera term, the pixels the render leaves unexplained, the ground points
+        (x, y) of those pixels, in the order ``mask[mask]`` reads them, and which of them
+        are strongly off (an RGB pixel STRONG_COLOUR_GAP off): a depth pixel back-projected
+        with its measured depth, an RGB pixel's ray followed down to the height objects
+        stand on (an RGB pixel whose ray never gets there is dropped)."""
         for t in self.terms:
             dirs, ray_to_z, centre = self.rays[t.frame]
             rendered = self.scorer.rendered(renders, t)
@@ -100,34 +112,41 @@ class BirthProposal:
                 if t.camera.depth_type == "z":
                     dist = dist / ray_to_z[near]
                 pts = centre + dirs[near] * dist[:, None]
+                strong = np.zeros(len(pts), dtype=bool)
             elif t.kind == "image":
-                near = _blobs(np.abs(t.observed - rendered).mean(axis=-1) > COLOUR_GAP)
+                off = np.abs(t.observed - rendered).mean(axis=-1)
+                blobs = _blobs(off > COLOUR_GAP)
+                strong = _specks(off > COLOUR_GAP, blobs, off > self.strong_gaps[t.frame])
+                near = blobs | strong
                 # An object seen from above is found where its pixel's ray meets the
                 # surface it stands on, not the ground under a table.
                 near &= (dirs[..., 2] < -1e-6) & (centre[2] > self.floor)
                 d = dirs[near]
                 s = (self.floor - centre[2]) / d[:, 2]
                 pts = centre + d * s[:, None]
+                strong = strong[near]
             else:
                 continue
-            yield near, pts[:, :2]
+            yield near, pts[:, :2], strong
 
     def seeds(self, trace) -> np.ndarray:
         """Ground points (S, 2) where whole objects seem to be missing from ``trace``: per
-        camera, each blob of at least SEED_PIXELS unexplained pixels gives the median of its
-        pixels' ground points; the largest MAX_SEEDS blobs over all cameras, largest first.
+        camera, each blob of at least SEED_PIXELS unexplained pixels, or with a strongly-off
+        one, gives the median of its pixels' ground points; the largest MAX_SEEDS blobs over
+        all cameras, largest first.
         A deterministic function of the state's renders, as a fitted birth's density needs
         (sppl.infer.fitted_birth)."""
         return _cached(trace, "birth_seeds", self._seeds)
 
     def _seeds(self, renders) -> np.ndarray:
         found = []  # (pixels, order found, point)
-        for mask, pts in self._unexplained(renders):
+        for mask, pts, strong in self._unexplained(renders):
             labels, count = ndimage.label(mask, structure=_CROSS)
             of_pixel = labels[mask]
             for blob in range(1, count + 1):
-                mine = pts[of_pixel == blob]
-                if len(mine) >= SEED_PIXELS:
+                here = of_pixel == blob
+                mine = pts[here]
+                if len(mine) >= SEED_PIXELS or strong[here].any():
                     found.append((len(mine), len(found), np.median(mine, axis=0)))
         found.sort(key=lambda f: (-f[0], f[1]))
         return np.array([f[2] for f in found[:MAX_SEEDS]]).reshape(-1, 2)
@@ -189,7 +208,17 @@ def depth_noise(observed: np.ndarray, valid: np.ndarray | None, far: float) -> f
     difference along rows, over runs of three measured pixels, scaled to a Gaussian's
     standard deviation (a second difference of independent noise has variance 6 sigma^2; a
     surface's slope cancels in it, and its edges are too few to move the median)."""
-    ok = _measured(observed, valid, far)
+    return _second_difference_scale(observed, _measured(observed, valid, far))
+
+
+def image_noise(observed: np.ndarray) -> float:
+    """``depth_noise``'s estimate for an RGB image (H, W, 3): the median of its channels'."""
+    ok = np.ones(observed.shape[:2], dtype=bool)
+    return float(np.median([_second_difference_scale(observed[..., c], ok)
+                            for c in range(observed.shape[-1])]))
+
+
+def _second_difference_scale(observed: np.ndarray, ok: np.ndarray) -> float:
     second = observed[:, :-2] - 2.0 * observed[:, 1:-1] + observed[:, 2:]
     runs = ok[:, :-2] & ok[:, 1:-1] & ok[:, 2:]
     if not runs.any():
@@ -211,6 +240,21 @@ def _cached(trace, key: str, compute) -> np.ndarray:
     if cached is None:
         cached = trace.cache[key] = compute(trace.renders)
     return cached
+
+
+def _specks(flagged: np.ndarray, blobs: np.ndarray, strong: np.ndarray) -> np.ndarray:
+    """The pieces of ``flagged`` (4-connected) that hold some ``strong`` pixel and fewer
+    than SEED_PIXELS pixels of ``blobs`` (the erosion left too little of them to seed),
+    whole: objects too small for a blob. A larger piece keeps only its blob, as before, so
+    that the eroded edge of an object the state lacks seeds nothing of its own."""
+    labels, count = ndimage.label(flagged, structure=_CROSS)
+    if not count:
+        return np.zeros_like(flagged)
+    keep = np.zeros(count + 1, dtype=bool)
+    keep[np.unique(labels[strong & flagged])] = True
+    keep &= np.bincount(labels[blobs], minlength=count + 1) < SEED_PIXELS
+    keep[0] = False
+    return keep[labels]
 
 
 def _blobs(mask: np.ndarray) -> np.ndarray:
