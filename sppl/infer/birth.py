@@ -116,7 +116,8 @@ class BirthProposal:
             elif t.kind == "image":
                 off = np.abs(t.observed - rendered).mean(axis=-1)
                 blobs = _blobs(off > COLOUR_GAP)
-                strong = _specks(off > COLOUR_GAP, blobs, off > self.strong_gaps[t.frame])
+                strong = _specks(off > COLOUR_GAP, blobs, off > self.strong_gaps[t.frame],
+                                 _edges(rendered))
                 near = blobs | strong
                 # An object seen from above is found where its pixel's ray meets the
                 # surface it stands on, not the ground under a table.
@@ -242,19 +243,36 @@ def _cached(trace, key: str, compute) -> np.ndarray:
     return cached
 
 
-def _specks(flagged: np.ndarray, blobs: np.ndarray, strong: np.ndarray) -> np.ndarray:
+def _specks(flagged: np.ndarray, blobs: np.ndarray, strong: np.ndarray,
+            edges: np.ndarray) -> np.ndarray:
     """The pieces of ``flagged`` (4-connected) that hold some ``strong`` pixel and fewer
     than SEED_PIXELS pixels of ``blobs`` (the erosion left too little of them to seed),
-    whole: objects too small for a blob. A larger piece keeps only its blob, as before, so
-    that the eroded edge of an object the state lacks seeds nothing of its own."""
+    whole, and touch none of the render's ``edges``: objects too small for a blob. A larger
+    piece keeps only its blob, as before, so that the eroded edge of an object the state
+    lacks seeds nothing of its own; and a piece along an edge the state draws is that edge
+    drawn a pixel off (a camera's anti-aliasing, a shadow's soft rim), not an object."""
     labels, count = ndimage.label(flagged, structure=_CROSS)
     if not count:
         return np.zeros_like(flagged)
     keep = np.zeros(count + 1, dtype=bool)
     keep[np.unique(labels[strong & flagged])] = True
     keep &= np.bincount(labels[blobs], minlength=count + 1) < SEED_PIXELS
+    keep[np.unique(labels[edges])] = False
     keep[0] = False
     return keep[labels]
+
+
+def _edges(rendered: np.ndarray) -> np.ndarray:
+    """The pixels within two of an edge in a render (H, W, 3): where its colour changes by
+    more than COLOUR_GAP from one pixel to the next."""
+    step = np.zeros(rendered.shape[:2], dtype=bool)
+    across = np.abs(np.diff(rendered, axis=1)).mean(axis=-1) > COLOUR_GAP
+    down = np.abs(np.diff(rendered, axis=0)).mean(axis=-1) > COLOUR_GAP
+    step[:, 1:] |= across
+    step[:, :-1] |= across
+    step[1:] |= down
+    step[:-1] |= down
+    return ndimage.binary_dilation(step, structure=_CROSS, iterations=2)
 
 
 def _blobs(mask: np.ndarray) -> np.ndarray:
