@@ -183,3 +183,34 @@ def test_the_depth_gap_follows_the_depth_maps_noise():
     noisy[60:] = -1.0  # what an invalid pixel holds is never read
     assert depth_noise(noisy, valid, 8.0) == pytest.approx(0.03, rel=0.1)
     assert depth_noise(depth, None, 8.0) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_a_speck_apart_from_the_drawn_edges_is_kept_and_one_along_them_is_not():
+    """On a grey floor with a red square drawn: a single pixel far off the render, apart
+    from everything, is a speck; the same pixel beside the square's edge (its rim drawn a
+    pixel off) is not; a pixel only a little off (sensor noise) is not; and a blob keeps
+    only what the erosion leaves of it, no speck of its own."""
+    from sppl.infer import birth
+
+    rendered = np.full((24, 24, 3), 0.45)
+    rendered[8:14, 8:14] = (0.8, 0.15, 0.12)
+
+    def specks(observed):
+        off = np.abs(observed - rendered).mean(axis=-1)
+        blobs = birth._blobs(off > birth.COLOUR_GAP)
+        return birth._specks(off > birth.COLOUR_GAP, blobs, off > birth.STRONG_COLOUR_GAP,
+                             birth._edges(rendered))
+
+    apart = rendered.copy()
+    apart[20, 3] = (0.1, 0.2, 0.8)
+    assert np.argwhere(specks(apart)).tolist() == [[20, 3]]
+    rim = rendered.copy()
+    rim[10, 14] = (0.8, 0.15, 0.12)
+    assert not specks(rim).any()
+    faint = rendered.copy()
+    faint[20, 3] = 0.6
+    assert not specks(faint).any()
+    blob = rendered.copy()
+    blob[16:22, 16:22] = (0.1, 0.2, 0.8)
+    assert not specks(blob).any() and birth._blobs(
+        np.abs(blob - rendered).mean(axis=-1) > birth.COLOUR_GAP).sum() == 16
