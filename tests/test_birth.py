@@ -188,18 +188,20 @@ def test_the_depth_gap_follows_the_depth_maps_noise():
 def test_a_speck_apart_from_the_drawn_edges_is_kept_and_one_along_them_is_not():
     """On a grey floor with a red square drawn: a single pixel far off the render, apart
     from everything, is a speck; the same pixel beside the square's edge (its rim drawn a
-    pixel off) is not; a pixel only a little off (sensor noise) is not; and a blob keeps
-    only what the erosion leaves of it, no speck of its own."""
+    pixel off) is not, nor a glint on the square; a pixel only a little off (sensor noise)
+    is not; and a blob keeps only what the erosion leaves of it, no speck of its own."""
     from sppl.infer import birth
 
     rendered = np.full((24, 24, 3), 0.45)
     rendered[8:14, 8:14] = (0.8, 0.15, 0.12)
+    square = np.zeros((24, 24), dtype=bool)
+    square[8:14, 8:14] = True
 
     def specks(observed):
         off = np.abs(observed - rendered).mean(axis=-1)
         blobs = birth._blobs(off > birth.COLOUR_GAP)
         return birth._specks(off > birth.COLOUR_GAP, blobs, off > birth.STRONG_COLOUR_GAP,
-                             birth._edges(rendered))
+                             birth._edges(rendered) | square)
 
     apart = rendered.copy()
     apart[20, 3] = (0.1, 0.2, 0.8)
@@ -207,6 +209,9 @@ def test_a_speck_apart_from_the_drawn_edges_is_kept_and_one_along_them_is_not():
     rim = rendered.copy()
     rim[10, 14] = (0.8, 0.15, 0.12)
     assert not specks(rim).any()
+    glint = rendered.copy()
+    glint[11, 11] = (1.0, 0.4, 0.4)
+    assert not specks(glint).any()
     faint = rendered.copy()
     faint[20, 3] = 0.6
     assert not specks(faint).any()

@@ -72,6 +72,7 @@ class BirthProposal:
         self.depth_gaps = {t.frame: max(DEPTH_GAP, 2.0 * depth_noise(t.observed, t.valid,
                                                                       t.camera.depth_max))
                            for t in self.terms if t.kind == "depth"}
+        self._static_depth = None
         self.strong_gaps = {t.frame: max(STRONG_COLOUR_GAP,
                                          STRONG_SIGMAS * image_noise(t.observed))
                             for t in self.terms if t.kind == "image"}
@@ -80,6 +81,14 @@ class BirthProposal:
             t.frame: (t.camera.ray_directions(), t.camera.ray_to_z(), t.camera.position)
             for t in self.terms
         }
+
+    def _drawn(self, renders, frame) -> np.ndarray:
+        """The pixels of camera ``frame`` where the state draws an object: its render's depth
+        nearer than the static scenery's (rendered once)."""
+        if self._static_depth is None:
+            self._static_depth = {f: depth for f, (_, depth)
+                                  in self.scorer.render(self.model.static_parts).items()}
+        return renders[frame][1] < self._static_depth[frame] - 1e-3
 
     # -- the points a state leaves unexplained ----------------------------------------------
 
@@ -117,7 +126,7 @@ class BirthProposal:
                 off = np.abs(t.observed - rendered).mean(axis=-1)
                 blobs = _blobs(off > COLOUR_GAP)
                 strong = _specks(off > COLOUR_GAP, blobs, off > self.strong_gaps[t.frame],
-                                 _edges(rendered))
+                                 _edges(rendered) | self._drawn(renders, t.frame))
                 near = blobs | strong
                 # An object seen from above is found where its pixel's ray meets the
                 # surface it stands on, not the ground under a table.
@@ -244,20 +253,22 @@ def _cached(trace, key: str, compute) -> np.ndarray:
 
 
 def _specks(flagged: np.ndarray, blobs: np.ndarray, strong: np.ndarray,
-            edges: np.ndarray) -> np.ndarray:
+            drawn: np.ndarray) -> np.ndarray:
     """The pieces of ``flagged`` (4-connected) that hold some ``strong`` pixel and fewer
     than SEED_PIXELS pixels of ``blobs`` (the erosion left too little of them to seed),
-    whole, and touch none of the render's ``edges``: objects too small for a blob. A larger
-    piece keeps only its blob, as before, so that the eroded edge of an object the state
-    lacks seeds nothing of its own; and a piece along an edge the state draws is that edge
-    drawn a pixel off (a camera's anti-aliasing, a shadow's soft rim), not an object."""
+    whole, and touch no pixel of ``drawn`` (the render's edges and the objects it draws):
+    objects too small for a blob, standing where the state has nothing. A larger piece
+    keeps only its blob, as before, so that the eroded edge of an object the state lacks
+    seeds nothing of its own; a piece along an edge the state draws is that edge drawn a
+    pixel off (a camera's anti-aliasing, a shadow's soft rim), and one on an object it
+    draws a glint (a metal sphere's highlight), not an object."""
     labels, count = ndimage.label(flagged, structure=_CROSS)
     if not count:
         return np.zeros_like(flagged)
     keep = np.zeros(count + 1, dtype=bool)
     keep[np.unique(labels[strong & flagged])] = True
     keep &= np.bincount(labels[blobs], minlength=count + 1) < SEED_PIXELS
-    keep[np.unique(labels[edges])] = False
+    keep[np.unique(labels[drawn])] = False
     keep[0] = False
     return keep[labels]
 
