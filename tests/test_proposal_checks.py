@@ -13,7 +13,8 @@ as it is and only the density the ratio uses made wrong:
 What each break is caught by: the birth's and the refit's density as the prior, or with half
 its spread, by the importance identity (p < 1e-9); a merge partner's density made uniform by
 the chi-square of the partners, and its scales halved by the identity; the refit's density
-as the prior also by the joint check on one tile; the thesis ratio by the joint check on two
+as the prior also by the joint check on one tile; the refit's choice of object made uniform,
+or its focus halved, by the chi-square of the objects chosen; the thesis ratio by the joint check on two
 strips. The joint check does not catch a wrong birth density in either setting (births aim
 at pixels that noise leaves, or are seldom accepted).
 
@@ -35,7 +36,7 @@ from toys import COLOURS
 
 from sppl import verify
 from sppl.infer import fit as fitting
-from sppl.infer import merge
+from sppl.infer import merge, misfit
 from sppl.infer.birth import BirthProposal
 from sppl.infer.chain import Sampler
 from sppl.model.distributions import Categorical, Gamma, Normal, Uniform
@@ -74,7 +75,8 @@ def seen_balls() -> Model:
     }
     weights = {"birth": 1.0, "death": 1.0, "replace": 1.0, "refit": 1.0, "merge": 1.0,
                "split": 1.0}
-    return Model((ball,), sensors, InferenceSettings(p_jump=1.0, jump_weights=weights))
+    return Model((ball,), sensors, InferenceSettings(p_jump=1.0, jump_weights=weights,
+                                                     refit_focus=0.75))
 
 
 @pytest.fixture(scope="module")
@@ -126,6 +128,14 @@ def partner_report(setting, seed=0, draws=2000) -> Report:
     crowded = pc.crowded_state(sampler, state.noise, rng, tries=15)
     assert crowded is not None
     return Report(pc.partner_rows(sampler, *crowded, rng, draws), ALPHA)
+
+
+def refit_choice_report(setting, seed=0, draws=1000) -> Report:
+    sampler, state, _ = setting
+    rng = np.random.default_rng(seed)
+    chosen = pc.misfit_state(sampler, state.noise, rng, tries=15)
+    assert chosen is not None
+    return Report(pc.refit_choice_rows(sampler, chosen, rng, draws), ALPHA)
 
 
 # -- the ways to break each density, sampling left as it is -----------------------------------
@@ -209,6 +219,34 @@ def partner_scales_halved(monkeypatch):
     _partners_drawn_right(monkeypatch, halved)
 
 
+def _objects_chosen_right(monkeypatch, wrong):
+    """Refits choose their object with the right probabilities, while their ratio (in both
+    states) uses ``wrong``."""
+    right = misfit.choice_log_probs
+
+    def choose(sampler, trace, rng):
+        p = np.exp(right(sampler, trace))
+        return int(rng.choice(len(p), p=p / p.sum()))
+
+    monkeypatch.setattr(misfit, "choice_log_probs", wrong)
+    monkeypatch.setattr(misfit, "choose", choose)
+
+
+def refit_choice_is_uniform(monkeypatch):
+    _objects_chosen_right(monkeypatch,
+                          lambda sampler, trace, focus=None: np.full(
+                              len(trace.objects), -math.log(len(trace.objects))))
+
+
+def refit_choice_focus_halved(monkeypatch):
+    right = misfit.choice_log_probs
+
+    def halved(sampler, trace, focus=None):
+        return right(sampler, trace, sampler.model.inference.refit_focus / 2)
+
+    _objects_chosen_right(monkeypatch, halved)
+
+
 # -- the checks pass on the code ---------------------------------------------------------------
 
 
@@ -239,6 +277,16 @@ def test_merge_partners_match_their_probabilities(wide):
     assert report.passed, report.table()
 
 
+def test_refit_objects_match_their_probabilities(wide):
+    """False alarm 1e-3 (Holm); the state's choice is far from uniform."""
+    report = refit_choice_report(wide)
+    assert report.passed, report.table()
+    sampler, state, _ = wide
+    chosen = pc.misfit_state(sampler, state.noise, np.random.default_rng(0), tries=15)
+    p = np.exp(misfit.choice_log_probs(sampler, chosen))
+    assert p.max() > 1.5 / len(p), p
+
+
 # -- and fail on each broken density -----------------------------------------------------------
 
 
@@ -253,6 +301,13 @@ def test_a_wrong_birth_density_is_caught(setting, monkeypatch, brk):
 def test_a_wrong_refit_density_is_caught(setting, monkeypatch, brk):
     brk(monkeypatch)
     report = refit_report(setting)
+    assert _smallest_p(report) < POWER, report.table()
+
+
+@pytest.mark.parametrize("brk", [refit_choice_is_uniform, refit_choice_focus_halved])
+def test_a_wrong_refit_choice_is_caught(wide, monkeypatch, brk):
+    brk(monkeypatch)
+    report = refit_choice_report(wide)
     assert _smallest_p(report) < POWER, report.table()
 
 

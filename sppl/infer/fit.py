@@ -3,13 +3,15 @@
 A sphere that the chain grew where a cube stands cannot become that cube by any one move that
 draws the cube's size and angle from the prior: the chance that a draw lands close enough to
 be accepted is around one in a million. The refit jump instead *fits* the new object to the
-observations first. It picks object k (uniform) and a class c (uniform), removes k, and runs
+observations first. It picks object k (where the observations disagree with the state:
+``sppl.infer.misfit``) and a class c (uniform), removes k, and runs
 a short deterministic search for the parameters of a c-object that maximise the posterior of
 the scene without k plus that object, starting from k's own values (by name) and its place.
 The proposal is then a mixture of the fit and a birth into x- (``sppl.infer.birth``, the replace
-jump's proposal), so that a refit can also leave a state the fit does not explain:
+jump's proposal), B the model's ``fit_births`` setting, so that a refit can also leave a state
+the fit does not explain:
 
-    y ~ q(y | x-, k) = (1 - MIX) q_fit(y | x-, k) + MIX q_birth(y | x-)
+    y ~ q(y | x-, k) = (1 - B) q_fit(y | x-, k) + B q_birth(y | x-)
     q_fit(y | x-, k) = (1/3) sum_c N(continuous parameters; fitted, diag((c s)^2))
                        x P(categorical parameters | fitted: the fitted value w.p. 1 - EPS)
                        x prior(integer parameters)
@@ -22,7 +24,8 @@ k-class object from the new object's values in the same x-, and must propose k e
 
     alpha_refit = pi(x- + y) q(old | x-, y) / (pi(x- + old) q(y | x-, old)).
 
-The object and class choices are uniform both ways and cancel. Proposals outside a
+The class choices are uniform both ways and cancel; the object's is q(k | y) / q(k | x) of
+``sppl.infer.misfit`` (the proposal's ``ratio_fn``). Proposals outside a
 parameter's domain have zero prior and are rejected, so the Gaussians need no truncation.
 """
 
@@ -37,12 +40,11 @@ import numpy as np
 from ..model.domains import Finite, Periodic
 from ..model.trace import SceneObject, Trace, make_object
 from ..model.types import ObjectClass
+from . import misfit
 from .moves import Proposal
 
 # Chance that a categorical parameter is not the fitted value (then uniform among the rest).
 EPS = 0.2
-# Share of refits drawn as a birth into the scene without the object instead of at the fit.
-MIX = 0.5
 # The search: passes over the continuous parameters, first step (in random-walk steps), and
 # how often a step is halved when no move improves the fit.
 START_STEP = 4.0
@@ -216,15 +218,21 @@ def log_density_bound(cls: ObjectClass, values) -> float:
     return total + float(np.logaddexp.reduce(spread)) - math.log(len(SPREADS))
 
 
+def _births(sampler) -> float:
+    return sampler.model.inference.fit_births
+
+
 def log_mixture(sampler, state: Trace, cls: ObjectClass, values, fitted) -> float:
-    return float(np.logaddexp(math.log1p(-MIX) + log_density(cls, values, fitted),
-                              math.log(MIX) + sampler.birth.log_density(cls, values, state)))
+    b = _births(sampler)
+    return float(np.logaddexp(math.log1p(-b) + log_density(cls, values, fitted),
+                              math.log(b) + sampler.birth.log_density(cls, values, state)))
 
 
 def log_mixture_bound(sampler, state: Trace, cls: ObjectClass, values) -> float:
     """An upper bound of ``log_mixture`` over every fit, computed without one."""
-    return float(np.logaddexp(math.log1p(-MIX) + log_density_bound(cls, values),
-                              math.log(MIX) + sampler.birth.log_density(cls, values, state)))
+    b = _births(sampler)
+    return float(np.logaddexp(math.log1p(-b) + log_density_bound(cls, values),
+                              math.log(b) + sampler.birth.log_density(cls, values, state)))
 
 
 def refitted_back(sampler, state: Trace, old: SceneObject, new: SceneObject, also=()):
@@ -255,7 +263,7 @@ def draw(cls: ObjectClass, fitted, rng: np.random.Generator) -> dict[str, Any]:
 def sample(sampler, state: Trace, cls: ObjectClass, fitted, rng: np.random.Generator):
     """A draw of the values of a ``cls`` object from the refit proposal around ``fitted``:
     the mixture whose density ``log_mixture`` gives."""
-    if rng.random() < MIX:
+    if rng.random() < _births(sampler):
         return sampler.birth.sample(cls, state, rng)
     return draw(cls, fitted, rng)
 
@@ -263,13 +271,14 @@ def sample(sampler, state: Trace, cls: ObjectClass, fitted, rng: np.random.Gener
 def propose_refit(sampler, trace: Trace, rng: np.random.Generator, k: int | None = None,
                   cls: ObjectClass | None = None, target: SceneObject | None = None,
                   state: Trace | None = None) -> Proposal | None:
-    """A refit of object k (uniform) as a ``cls`` (uniform) object; given ``target``, the
+    """A refit of object k (``misfit.choose``) as a ``cls`` (uniform) object; given ``target``, the
     proposal of exactly that object (the reverse of a refit, through the same ``state``)."""
     n = len(trace.objects)
     if n == 0:
         return None
     model = sampler.model
-    k = int(rng.integers(n)) if k is None else k
+    k = misfit.choose(sampler, trace, rng) if k is None else k
+    here = misfit.choice_log_probs(sampler, trace)
     cls = model.classes[int(rng.integers(len(model.classes)))] if cls is None else cls
     old = trace.objects[k]
     rest = trace.objects[:k] + trace.objects[k + 1 :]
@@ -287,5 +296,12 @@ def propose_refit(sampler, trace: Trace, rng: np.random.Generator, k: int | None
     log_q_forward = log_mixture(sampler, state, cls, values, forward)
     # The reverse fit is computed only when the proposal has a chance (Sampler.decide).
     back, bound = refitted_back(sampler, state, old, obj)
+
+    def choices(new: Trace) -> float:
+        # A focused choice of k has its probability in either state (sppl.infer.misfit).
+        return float(misfit.choice_log_probs(sampler, new)[k] - here[k])
+
+    focused = model.inference.refit_focus > 0.0
     return Proposal("refit", old.cls.name, objects, trace.noise, (obj,), -log_q_forward,
-                    tries=Refit(state, k), deferred=back, deferred_bound=bound)
+                    ratio_fn=choices if focused else None, tries=Refit(state, k),
+                    deferred=back, deferred_bound=bound)

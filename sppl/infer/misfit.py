@@ -6,7 +6,7 @@ object of such a state is right, and a refit of one of them is a wasted move: wi
 objects and the object chosen uniformly, the refit that would fix the cube comes once in
 six. The refit instead chooses object k with probability
 
-    q(k | x) = (1 - FOCUS) / n + FOCUS m_k(x) / sum_j m_j(x)
+    q(k | x) = (1 - F) / n + F m_k(x) / sum_j m_j(x)
 
 with m_k(x) the pixels of the state's renders, inside the rectangle object k covers in each
 camera, that disagree with the observations (an RGB pixel by more than the birth's colour
@@ -14,8 +14,9 @@ gap, a depth pixel by more than its depth gap, either way), and q uniform where 
 disagrees or the scorer draws no rectangles (the reference and prior scorers). It is a
 deterministic function of the state's renders, so a refit's ratio carries
 q(k | y) / q(k | x), with y the state the refit proposes (the new object in k's place).
-The uniform share keeps every object's chance at least (1 - FOCUS) / n, so that refits of an
-object that looks right, which the chain also needs to mix, still come.
+F is the model's ``refit_focus`` setting; at 0 (the default) the choice is uniform and draws
+what it always drew. The uniform share keeps every object's chance at least (1 - F) / n, so
+that refits of an object that looks right, which the chain also needs to mix, still come.
 """
 
 from __future__ import annotations
@@ -25,10 +26,6 @@ import math
 import numpy as np
 
 from .birth import COLOUR_GAP, _measured
-
-# The share of the choice that follows the disagreeing pixels.
-FOCUS = 0.75
-
 
 def disagreeing(sampler, trace) -> dict[str, np.ndarray]:
     """Per camera frame, the pixels where the state's renders and the observations disagree
@@ -69,17 +66,21 @@ def misfits(sampler, trace) -> np.ndarray | None:
     return counts
 
 
-def choice_log_probs(sampler, trace) -> np.ndarray:
-    """log q(k | trace) of the refit's choice of object, over the objects of ``trace``."""
+def choice_log_probs(sampler, trace, focus: float | None = None) -> np.ndarray:
+    """log q(k | trace) of the refit's choice of object, over the objects of ``trace``, with
+    the model's focus or ``focus``."""
     n = len(trace.objects)
+    focus = sampler.model.inference.refit_focus if focus is None else focus
     if n == 0:
         return np.empty(0)
-    m = misfits(sampler, trace)
+    m = misfits(sampler, trace) if focus > 0.0 else None
     if m is None or m.sum() == 0:
         return np.full(n, -math.log(n))
-    return np.log((1.0 - FOCUS) / n + FOCUS * m / m.sum())
+    return np.log((1.0 - focus) / n + focus * m / m.sum())
 
 
 def choose(sampler, trace, rng: np.random.Generator) -> int:
+    if sampler.model.inference.refit_focus == 0.0:
+        return int(rng.integers(len(trace.objects)))
     p = np.exp(choice_log_probs(sampler, trace))
     return int(rng.choice(len(p), p=p / p.sum()))

@@ -25,8 +25,8 @@ _RENDER_KEYS = ("background", "ambient", "light", "intensity", "sheen", "gain", 
 # share of the light, a grey level).
 _NONNEGATIVE = ("ambient", "intensity", "sheen", "gain", "red", "blue")
 _UNIT = ("ambient", "sheen")
-_INFERENCE_KEYS = ("p_jump", "data_birth", "data_birth_spread", "adapt", "anneal", "anneal_from",
-                   "tries", "tempered", "tempered_from")
+_INFERENCE_KEYS = ("p_jump", "data_birth", "data_birth_spread", "refit_focus", "fit_births",
+                   "adapt", "anneal", "anneal_from", "tries", "tempered", "tempered_from")
 
 
 class Settings:
@@ -147,6 +147,15 @@ class Settings:
                     self.error(
                         f"`data_birth_spread` must be positive, got {value:g}", item.value.span
                     )
+                elif key == "refit_focus" and not 0.0 <= value <= 1.0:
+                    self.error(f"`refit_focus` is a share in [0, 1], got {value:g}",
+                               item.value.span, "0 chooses the object to refit uniformly")
+                elif key == "fit_births" and not 0.0 < value < 1.0:
+                    self.error(
+                        f"`fit_births` is a share strictly between 0 and 1, got {value:g}",
+                        item.value.span,
+                        "without births a fitted proposal could not leave a state far from "
+                        "every fit; without fits it is a replace")
                 elif key in ("adapt", "anneal") and not (value >= 0 and value == int(value)):
                     self.error(f"`{key}` is a number of sweeps, got {value:g}", item.value.span,
                                "0 switches it off")

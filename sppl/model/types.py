@@ -227,6 +227,12 @@ class InferenceSettings:
     # draw from the prior (sppl/infer/birth.py), and the spread of that placement in metres.
     data_birth: float = 0.5
     data_birth_spread: float = 0.25
+    # The refit's choice of object: the share of it that follows the pixels the state gets
+    # wrong (sppl/infer/misfit.py; 0: uniform), and the share of fitted proposals (refits,
+    # merges, splits, fitted births) drawn as a birth instead of around the fit
+    # (sppl/infer/fit.py).
+    refit_focus: float = 0.0
+    fit_births: float = 0.5
     # Relative weights of the model jumps, by default each registered jump's own
     # (sppl.model.jumps). The thesis has birth, death and change, equally weighted; replace
     # (sppl.infer.moves.propose_replace) is sppl's addition. refit (sppl.infer.fit), merge and

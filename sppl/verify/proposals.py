@@ -3,7 +3,8 @@
 Prior recovery runs without observations, so it never switches on the proposals that look at
 them: births near unexplained pixels (``sppl.infer.birth``, also used by replaces, splits, the
 refit's mixture and multiple tries), refits fitted to the pixels (``sppl.infer.fit``, also merges'
-and splits'), and merge partners chosen by distance in the image (``sppl.infer.merge``). Geweke's
+and splits') of an object chosen where the pixels disagree (``sppl.infer.misfit``), and merge
+partners chosen by distance in the image (``sppl.infer.merge``). Geweke's
 test runs them, but its power against a wrong density is small: a birth density replaced by
 the prior passes it. So these checks hold the observations fixed and test each such proposal
 directly, with the very functions the moves call to draw from it and to score it:
@@ -12,8 +13,9 @@ directly, with the very functions the moves call to draw from it and to score it
   conditional probability integral transform u = F(v_j | the draw's other coordinates), F
   computed from the proposal's own log density by quadrature along that coordinate (by sums
   over a categorical one, randomised within the atom). If the density is the sampler's, every
-  u is uniform (Rosenblatt); Kolmogorov-Smirnov tests it. For a merge partner (a discrete
-  choice), chi-square of the chosen partners against the probabilities the ratio uses.
+  u is uniform (Rosenblatt); Kolmogorov-Smirnov tests it. For a merge partner and the object a
+  refit replaces (discrete choices), chi-square of the choices against the probabilities the
+  ratio uses.
 - ``importance identity``: for a normalised reference density r that is zero outside a
   bounded region B (a normal truncated to B, around what the proposal aims at, times the
   prior of the coordinates the proposal draws from the prior), E_{v ~ sampler}[r(v) / q(v)]
@@ -34,7 +36,7 @@ import numpy as np
 from scipy import stats
 
 from ..infer import fit as fitting
-from ..infer import merge
+from ..infer import merge, misfit
 from ..infer.chain import Sampler
 from ..model.domains import Finite, Integer, Interval, Periodic
 from ..model.trace import SceneObject, Trace, make_object
@@ -323,6 +325,84 @@ def partner_rows(sampler: Sampler, trace: Trace, i: int, rng: np.random.Generato
     return rows
 
 
+def refit_object(sampler: Sampler, trace: Trace, rng: np.random.Generator) -> int:
+    """The object ``fit.propose_refit`` chooses in ``trace``: the move's own code run up to
+    the choice, and stopped where its fit would begin."""
+    objects = trace.objects
+    original = fitting.fit
+
+    def stop(sampler_, state, cls, like, keep=None, also=()):
+        raise _Chosen(next(k for k, o in enumerate(objects) if o is like))
+
+    fitting.fit = stop
+    try:
+        fitting.propose_refit(sampler, trace, rng, state=trace)
+    except _Chosen as chosen:
+        return chosen.place
+    finally:
+        fitting.fit = original
+    raise RuntimeError("propose_refit made no choice of object")
+
+
+def refit_choice_rows(sampler: Sampler, trace: Trace, rng: np.random.Generator,
+                      draws: int) -> list[Row]:
+    """The objects ``fit.propose_refit`` chooses in ``trace``, against
+    ``misfit.choice_log_probs`` (what its ratio uses, in both states): chi-square over the
+    objects (bins pooled to expected counts of at least 5), and E[r/q] = 1 with r uniform."""
+    from .statistics import chisquare_gof
+
+    log_q = misfit.choice_log_probs(sampler, trace)
+    n = len(trace.objects)
+    chosen = np.array([refit_object(sampler, trace, rng) for _ in range(draws)])
+    observed = np.bincount(chosen, minlength=n).astype(float)
+    label = f"refit object of {n}"
+    chi2, p = chisquare_gof(observed, np.exp(log_q) / np.exp(log_q).sum())
+    return [Row("proposals", f"{label}: objects",
+                "chosen with the ratio's probabilities (chi-square)",
+                f"chi2={chi2:.1f}, n={draws}", p),
+            identity_row("proposals", label, list(chosen), lambda k: float(log_q[k]),
+                         lambda k: -math.log(n))]
+
+
+def _from_uniform(counts: np.ndarray) -> float | None:
+    """The chi-square distance of a pilot's counts of each option from uniform; None where
+    an option was drawn fewer than twice (a wrong density would not show there)."""
+    if counts.min() < 2:
+        return None
+    share = counts / counts.sum()
+    return float(np.sum((share - 1 / len(counts)) ** 2) * len(counts))
+
+
+def _prior_states(sampler: Sampler, noise, rng: np.random.Generator, tries: int, low: int,
+                  high: int):
+    """Up to ``tries`` states of ``low`` to ``high`` objects (a uniform number) of uniform
+    classes drawn from their priors, with their sizes; draws that break a constraint are
+    skipped."""
+    model = sampler.model
+    for _ in range(tries):
+        n = low + int(rng.integers(high - low + 1))
+        objects = tuple(make_object(model, c, c.sample_prior(rng))
+                        for c in (model.classes[int(rng.integers(len(model.classes)))]
+                                  for _ in range(n)))
+        if all(math.isfinite(o.log_prior) for o in objects):
+            yield n, sampler.make_trace(objects, noise)
+
+
+def misfit_state(sampler: Sampler, noise, rng: np.random.Generator, tries: int = 30,
+                 pilot: int = 60):
+    """A state of two to five objects (prior draws) whose refit choices, in a pilot of
+    ``pilot`` draws from the move itself, are furthest from uniform (chi-square distance),
+    every object drawn at least twice; as ``crowded_state``, the pilot looks at the move's
+    sampler only. None if no state qualifies."""
+    best, best_d = None, 0.0
+    for n, trace in _prior_states(sampler, noise, rng, tries, 2, 5):
+        d = _from_uniform(np.bincount([refit_object(sampler, trace, rng)
+                                       for _ in range(pilot)], minlength=n))
+        if d is not None and d > best_d:
+            best, best_d = trace, d
+    return best
+
+
 def _uses(sampler: Sampler, *jumps: str) -> bool:
     return any(sampler.jump.get(j, 0.0) > 0 for j in jumps)
 
@@ -358,23 +438,12 @@ def crowded_state(sampler: Sampler, noise, rng: np.random.Generator, tries: int 
     (by chi-square distance) while every one of them is drawn at least twice: where a wrong
     partner density shows, with every partner drawn. The pilot looks at the move's sampler
     only, so a wrong density cannot steer it. None if no state qualifies."""
-    model = sampler.model
     best, best_d = None, 0.0
-    for _ in range(tries):
-        n = 3 + int(rng.integers(3))
-        objects = tuple(make_object(model, c, c.sample_prior(rng))
-                        for c in (model.classes[int(rng.integers(len(model.classes)))]
-                                  for _ in range(n)))
-        if any(not math.isfinite(o.log_prior) for o in objects):
-            continue
-        trace = sampler.make_trace(objects, noise)
+    for n, trace in _prior_states(sampler, noise, rng, tries, 3, 5):
         for i in range(n):
             chosen = [merge_partner(sampler, trace, i, rng) for _ in range(pilot)]
-            f = np.delete(np.bincount(chosen, minlength=n), i)
-            if f.min() < 2:
-                continue
-            d = float(np.sum((f / pilot - 1 / len(f)) ** 2) * len(f))
-            if d > best_d:
+            d = _from_uniform(np.delete(np.bincount(chosen, minlength=n), i))
+            if d is not None and d > best_d:
                 best, best_d = (trace, i), d
     return best
 
@@ -415,6 +484,13 @@ def check_proposals(model: Model, *, seed=0, size: int = 16, draws: int = 150,
     if _uses(sampler, "refit", "merge", "split", "fitted_birth", "fitted_death"):
         for cls in model.classes:
             rows += refit_rows(sampler, state, cls, missing, rng, draws, weights)
+    if _uses(sampler, "refit") and model.inference.refit_focus > 0.0:
+        chosen = misfit_state(sampler, state.noise, rng)
+        if chosen is None:
+            notes.append("proposals: no state of two or more objects gave the refit's choice "
+                         "of object any doubt; the choice untested.")
+        else:
+            rows += refit_choice_rows(sampler, chosen, rng, partner_draws)
     if _uses(sampler, "merge", "split"):
         crowded = crowded_state(sampler, state.noise, rng)
         if crowded is None:
