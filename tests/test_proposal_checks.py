@@ -287,6 +287,36 @@ def test_refit_objects_match_their_probabilities(wide):
     assert p.max() > 1.5 / len(p), p
 
 
+def test_the_refit_aims_at_the_object_the_pixels_disagree_with(wide):
+    """The missing ball put back a metre off its place gains disagreeing pixels (beyond those
+    the heavy noise of these cameras leaves everywhere) and the refit's chance; the same
+    state with the model's focus at 0 chooses uniformly, with the generator's draws of before
+    (one integer) and no term in the ratio."""
+    import dataclasses
+
+    sampler, state, missing = wide
+    right = sampler.make_trace(state.objects + (missing,), state.noise)
+    moved = dataclasses.replace(missing, values={**missing.values,
+                                                 "x": missing.values["x"] + 1.0})
+    moved = make_object(sampler.model, missing.cls, moved.values)
+    wrong = sampler.make_trace(state.objects + (moved,), state.noise)
+    m_right, m_wrong = misfit.misfits(sampler, right), misfit.misfits(sampler, wrong)
+    assert m_wrong[-1] > m_right[-1] + 50, (m_right, m_wrong)
+    p_right = np.exp(misfit.choice_log_probs(sampler, right))
+    p = np.exp(misfit.choice_log_probs(sampler, wrong))
+    assert p[-1] > p_right[-1] and abs(p.sum() - 1) < 1e-12, (p_right, p)
+
+    flat = dataclasses.replace(sampler.model, inference=dataclasses.replace(
+        sampler.model.inference, refit_focus=0.0))
+    plain = Sampler(flat, sampler.scorer, np.random.default_rng(0))
+    n = len(wrong.objects)
+    assert np.allclose(misfit.choice_log_probs(plain, wrong), -math.log(n))
+    picks = [misfit.choose(plain, wrong, np.random.default_rng(s)) for s in range(20)]
+    assert picks == [int(np.random.default_rng(s).integers(n)) for s in range(20)]
+    proposal = fitting.propose_refit(plain, wrong, np.random.default_rng(1))
+    assert proposal.ratio_fn is None
+
+
 # -- and fail on each broken density -----------------------------------------------------------
 
 
