@@ -27,6 +27,7 @@ import numpy as np
 
 from .birth import COLOUR_GAP, _measured
 
+
 def disagreeing(sampler, trace) -> dict[str, np.ndarray]:
     """Per camera frame, the pixels where the state's renders and the observations disagree
     (an RGB term's and a depth term's together)."""
@@ -80,6 +81,8 @@ def choice_log_probs(sampler, trace, focus: float | None = None) -> np.ndarray:
 
 
 def choose(sampler, trace, rng: np.random.Generator) -> int:
+    """The refit's object, drawn from ``choice_log_probs``; without a focus, one integer from
+    ``rng``, as the refit always drew it, so that a model without a focus keeps its chains."""
     if sampler.model.inference.refit_focus == 0.0:
         return int(rng.integers(len(trace.objects)))
     p = np.exp(choice_log_probs(sampler, trace))
