@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from false_alarms import EACH, SLOW_EACH
+from false_alarms import SLOW_EACH
 
 from sppl.data.camera import Camera, look_at
 from sppl.infer import moves
@@ -116,18 +116,14 @@ def assert_tested(report, model, min_draws: int) -> None:
         assert draws >= min_draws, f"{name}: only {draws} thinned draws\n{report.table()}"
 
 
-# Under the prior a refit, merge or split runs its fit of up to 100 evaluations, so the models
-# that have them take minutes here. shapes.scn, restricted to the ground its cameras see, takes
-# five to ten minutes, and shapes_plus.scn's moves are shapes.scn's less merges and splits: both
-# run with the slow tests. The default tests check those moves under the prior on their own
-# (test_merge, test_refit, test_tries) and every shipped model's draws and renders above.
-SLOW_PRIOR_RECOVERY = {"shapes", "shapes_plus"}
-
-
-@pytest.mark.parametrize("name", [
-    pytest.param(n, marks=[pytest.mark.slow, pytest.mark.false_alarm(SLOW_EACH)])
-    if n in SLOW_PRIOR_RECOVERY else pytest.param(n, marks=pytest.mark.false_alarm(EACH))
-    for n in sorted(VIEWS)])
+# Under the prior a refit, merge or split runs its fit of a few hundred evaluations, so each
+# model takes three to ten minutes here (blocks and tabletop took six each beside the rest of
+# the suite, a third of its time): they run with the slow tests. The default tests check those
+# moves under the prior on their own (test_merge, test_refit, test_tries) and every shipped
+# model's draws and renders above.
+@pytest.mark.slow
+@pytest.mark.false_alarm(SLOW_EACH)
+@pytest.mark.parametrize("name", sorted(VIEWS))
 def test_prior_recovery(false_alarm, name):
     """The model's sampler, with its noise steps widened to their priors' spread (they are
     tuned for a posterior; a random walk leaves the prior invariant at any scale), recovers
