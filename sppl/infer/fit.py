@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy import optimize
 
 from ..model.domains import Finite, Periodic
 from ..model.trace import SceneObject, Trace, make_object
@@ -136,6 +137,38 @@ class _Search:
                     improved |= self.trial(p.name, p.domain.wrap(here + t * period / TURNS))
         return improved
 
+    def polish(self, evaluations: int) -> None:
+        """Powell's method over the continuous parameters, in units of their steps, from the
+        values found so far, for at most ``evaluations`` scores: its line searches along the directions it has moved in follow
+        a ridge that steps of one parameter at a time cannot, as a box fitted short along its
+        length needs its length and both coordinates of its centre to move together."""
+        cont = [p for p in self.cls.parameters if p.continuous]
+        if not cont or evaluations <= 0:
+            return
+        scale = np.array([p.proposal_scale for p in cont])
+        base = dict(self.values)
+
+        def values_at(z) -> dict[str, Any]:
+            values = dict(base)
+            for p, v in zip(cont, np.asarray(z) * scale):
+                values[p.name] = p.domain.wrap(float(v)) if isinstance(p.domain, Periodic) \
+                    else float(v)
+            return values
+
+        def loss(z) -> float:
+            values = values_at(z)
+            s = _score(self.sampler, self.state, self.cls, values)
+            self.evaluations += 1
+            if s > self.best:
+                self.values, self.best = values, s
+            # Powell's line searches need finite values; outside the prior's support the
+            # loss is a wall far above any score the search has seen.
+            return -s if math.isfinite(s) else -self.best + 1e9
+
+        start = np.array([base[p.name] for p in cont]) / scale
+        optimize.minimize(loss, start, method="Powell",
+                          options={"maxfev": evaluations, "xtol": 1e-3, "ftol": 1e-12})
+
     def pattern(self) -> None:
         cont = [p for p in self.cls.parameters if p.continuous]
         steps = {p.name: START_STEP * p.proposal_scale for p in cont}
@@ -157,26 +190,51 @@ class _Search:
                 halvings += 1
 
 
-def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None, also=()
-        ) -> dict[str, Any]:
+def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None, also=(),
+        seeds: int = 0, polish: int = 0) -> dict[str, Any]:
     """The deterministic fit of a ``cls`` object into ``state``, from ``like``'s values (those
     named in ``keep``, if given) or those of the objects ``also`` (a merge's others, whose
     pixels the fit takes over): the best of the starts, each categorical parameter set to
     its best value, each angle at its best of TURNS turns, then a pattern search over the
     continuous parameters (a step each way per parameter, halved when nothing improves); the
     turns and the search once more where the turns still improve the fit (the first ones were
-    tried at a size and place that were off), and the categorical parameters again."""
+    tried at a size and place that were off), and the categorical parameters again.
+
+    With ``seeds``, the same search also runs from each of that many of the state's seeds
+    (its largest blobs of unexplained pixels, ``BirthProposal.seeds``), starting from the
+    best of the first start's values and START_DRAWS fixed prior draws, each moved there;
+    the best search wins. With ``polish``, Powell's method then takes at most that many
+    scores more (``_Search.polish``). Both keep the fit a deterministic function of its
+    arguments and the state."""
     starts = [v for o in (like, *also) for v in _starts(cls, o, keep)]
     scores = [_score(sampler, state, cls, v) for v in starts]
     best = max(scores)
-    search = _Search(sampler, state, cls, starts[scores.index(best)], best)
+    values = starts[scores.index(best)]
+    found = _search(sampler, state, cls, values, best)
+    if seeds and cls.position:
+        draws = [values, *_starts(cls, like, keep=())]
+        for seed in sampler.birth.seeds(state)[:seeds]:
+            moved = [{**v, cls.position[0]: float(seed[0]), cls.position[1]: float(seed[1])}
+                     for v in draws]
+            scores = [_score(sampler, state, cls, v) for v in moved]
+            best = max(scores)
+            other = _search(sampler, state, cls, moved[scores.index(best)], best)
+            if other.best > found.best:
+                found = other
+    if polish:
+        found.polish(polish)
+    return found.values
+
+
+def _search(sampler, state, cls, values, best) -> _Search:
+    search = _Search(sampler, state, cls, values, best)
     search.categorical()
     search.turns()
     search.pattern()
     if search.turns():
         search.pattern()
     search.categorical()
-    return search.values
+    return search
 
 
 def log_density(cls: ObjectClass, values, fitted) -> float:
@@ -235,13 +293,15 @@ def log_mixture_bound(sampler, state: Trace, cls: ObjectClass, values) -> float:
                               math.log(b) + sampler.birth.log_density(cls, values, state)))
 
 
-def refitted_back(sampler, state: Trace, old: SceneObject, new: SceneObject, also=()):
+def refitted_back(sampler, state: Trace, old: SceneObject, new: SceneObject, also=(),
+                  seeds: int = 0, polish: int = 0):
     """The reverse density of a move that replaced ``old`` by the fitted ``new`` in
     ``state``, log q_mixture(old | the fit of old's class from new, and ``also``), deferred:
     the function that computes it (one more fit), and an upper bound of it (no fit
     needed)."""
     return (lambda: log_mixture(sampler, state, old.cls, old.values,
-                                fit(sampler, state, old.cls, new, also=also)),
+                                fit(sampler, state, old.cls, new, also=also,
+                                    seeds=seeds, polish=polish)),
             log_mixture_bound(sampler, state, old.cls, old.values))
 
 

@@ -43,6 +43,11 @@ gains, in the merge's density, c_M(m) and each further choice's probability, and
 split's c_MAX_TAKEN(m), one K and one
 q_birth per newborn; the newborns in the order drawn are the merged-away objects in the
 order chosen.
+
+The fit of the merged object y (in a merge, and in a split's reverse) may search further
+than a refit's: from the model's ``merge_seeds`` seeds of x- as well, and polished by
+``merge_polish`` evaluations of Powell's method (``merge_search``). It is still a
+deterministic function of x- and the objects it starts from, the same in both directions.
 """
 
 from __future__ import annotations
@@ -148,15 +153,25 @@ def _without(objects, *places) -> tuple:
     return tuple(o for p, o in enumerate(objects) if p not in places)
 
 
+def merge_search(sampler) -> dict[str, int]:
+    """How far a merge's fit searches (``sppl.infer.fit.fit``): from the model's
+    ``merge_seeds`` seeds of the scene without the merged objects besides their values, and
+    ``merge_polish`` evaluations of Powell's method. Only the fit of the merged object (in the
+    merge, and in the split's reverse) searches further; the split's fit of its object from
+    the one it splits, which only shrinks it, is the refit's."""
+    settings = sampler.model.inference
+    return {"seeds": settings.merge_seeds, "polish": settings.merge_polish}
+
+
 def _refitted(sampler, state: Trace, like: SceneObject, rng: np.random.Generator,
-              target: SceneObject | None, also=()) -> tuple[SceneObject, dict]:
+              target: SceneObject | None, also=(), search=None) -> tuple[SceneObject, dict]:
     """A draw from the refit proposal of a uniform class into ``state``, starting from
     ``like`` or the objects ``also`` (or exactly ``target``), and the fit it is drawn
     around."""
     model = sampler.model
     cls = target.cls if target is not None else model.classes[
         int(rng.integers(len(model.classes)))]
-    forward = fitting.fit(sampler, state, cls, like, also=also)
+    forward = fitting.fit(sampler, state, cls, like, also=also, **(search or {}))
     if target is None:
         target = make_object(model, cls, fitting.sample(sampler, state, cls, forward, rng))
     return target, forward
@@ -230,7 +245,8 @@ def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None
     gone, old = [objects[p] for p in taken], objects[j]
     rest = _without(objects, j, *taken)
     state = state if state is not None else sampler.make_trace(rest, trace.noise)
-    new, forward = _refitted(sampler, state, old, rng, target, also=gone)
+    new, forward = _refitted(sampler, state, old, rng, target, also=gone,
+                             search=merge_search(sampler))
     cls = new.cls
     merged = tuple(new if p == j else o for p, o in enumerate(objects) if p not in taken)
     tag = MergeSplit(state, j, taken)
@@ -305,6 +321,7 @@ def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None
     log_q_back = (_log(sampler.jump["merge"]) - math.log(n)
                   + count_log_prob(len(born), taken_counts(n))
                   + chosen_log_prob(logw, logw_j, i, j, more) - math.log(n_classes))
-    back, bound = fitting.refitted_back(sampler, state, old, fitted, also=born)
+    back, bound = fitting.refitted_back(sampler, state, old, fitted, also=born,
+                                          **merge_search(sampler))
     return Proposal("split", old.cls.name, split, trace.noise, (fitted, *born),
                     log_q_back - log_q_forward, tries=tag, deferred=back, deferred_bound=bound)

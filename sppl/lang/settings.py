@@ -26,7 +26,7 @@ _RENDER_KEYS = ("background", "ambient", "light", "intensity", "sheen", "gain", 
 _NONNEGATIVE = ("ambient", "intensity", "sheen", "gain", "red", "blue")
 _UNIT = ("ambient", "sheen")
 _INFERENCE_KEYS = ("p_jump", "data_birth", "data_birth_spread", "refit_focus", "fit_births",
-                   "adapt", "anneal", "anneal_from", "tries", "tempered", "tempered_from")
+                   "merge_seeds", "merge_polish", "adapt", "anneal", "anneal_from", "tries", "tempered", "tempered_from")
 
 
 class Settings:
@@ -159,6 +159,12 @@ class Settings:
                 elif key in ("adapt", "anneal") and not (value >= 0 and value == int(value)):
                     self.error(f"`{key}` is a number of sweeps, got {value:g}", item.value.span,
                                "0 switches it off")
+                elif key == "merge_seeds" and not (value >= 0 and value == int(value)):
+                    self.error(f"`merge_seeds` is a number of seeds, got {value:g}",
+                               item.value.span, "0 searches from the merged objects alone")
+                elif key == "merge_polish" and not (value >= 0 and value == int(value)):
+                    self.error(f"`merge_polish` is a number of evaluations, got {value:g}",
+                               item.value.span, "0 switches it off")
                 elif key == "tries" and not (value >= 1 and value == int(value)):
                     self.error(f"`tries` is a number of candidates, at least 1, got {value:g}",
                                item.value.span)
@@ -169,7 +175,8 @@ class Settings:
                     self.error(f"`{key}` is a power of the likelihood in (0, 1], got "
                                f"{value:g}", item.value.span)
                 else:
-                    if key in ("adapt", "anneal", "tries", "tempered"):
+                    if key in ("adapt", "anneal", "tries", "tempered", "merge_seeds",
+                               "merge_polish"):
                         value = int(value)
                     self.inference_values[key] = value
 

@@ -233,6 +233,11 @@ class InferenceSettings:
     # (sppl/infer/fit.py).
     refit_focus: float = 0.0
     fit_births: float = 0.5
+    # How much further a merge's fit searches (sppl/infer/merge.py): from this many seeds of
+    # the scene without the merged objects besides their values, and this many evaluations of
+    # Powell's method after it (0: the refit's search alone).
+    merge_seeds: int = 0
+    merge_polish: int = 0
     # Relative weights of the model jumps, by default each registered jump's own
     # (sppl.model.jumps). The thesis has birth, death and change, equally weighted; replace
     # (sppl.infer.moves.propose_replace) is sppl's addition. refit (sppl.infer.fit), merge and
