@@ -284,7 +284,7 @@ def merge_partner(sampler: Sampler, trace: Trace, i: int, rng: np.random.Generat
     objects = trace.objects
     original = merge._refitted
 
-    def stop(sampler_, state, like, rng_, target, also=()):
+    def stop(sampler_, state, like, *_, **__):
         raise _Chosen(next(k for k, o in enumerate(objects) if o is like))
 
     merge._refitted = stop
