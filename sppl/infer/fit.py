@@ -139,9 +139,10 @@ class _Search:
 
     def polish(self, evaluations: int) -> None:
         """Powell's method over the continuous parameters, in units of their steps, from the
-        values found so far, for at most ``evaluations`` scores: its line searches along the directions it has moved in follow
-        a ridge that steps of one parameter at a time cannot, as a box fitted short along its
-        length needs its length and both coordinates of its centre to move together."""
+        values found so far, for at most ``evaluations`` scores: its line searches along the
+        directions it has moved in follow a ridge that steps of one parameter at a time
+        cannot, as a box fitted short along its length needs its length and both coordinates
+        of its centre to move together."""
         cont = [p for p in self.cls.parameters if p.continuous]
         if not cont or evaluations <= 0:
             return

@@ -26,7 +26,13 @@ _RENDER_KEYS = ("background", "ambient", "light", "intensity", "sheen", "gain", 
 _NONNEGATIVE = ("ambient", "intensity", "sheen", "gain", "red", "blue")
 _UNIT = ("ambient", "sheen")
 _INFERENCE_KEYS = ("p_jump", "data_birth", "data_birth_spread", "refit_focus", "fit_births",
-                   "merge_seeds", "merge_polish", "adapt", "anneal", "anneal_from", "tries", "tempered", "tempered_from")
+                   "merge_seeds", "merge_polish", "adapt", "anneal", "anneal_from", "tries",
+                   "tempered", "tempered_from")
+# Inference settings that count something, at least 0: what each counts, and the hint of its
+# error.
+_COUNTS = {"adapt": ("sweeps", "0 switches it off"), "anneal": ("sweeps", "0 switches it off"),
+           "merge_seeds": ("seeds", "0 searches from the merged objects alone"),
+           "merge_polish": ("evaluations", "0 switches it off")}
 
 
 class Settings:
@@ -156,15 +162,10 @@ class Settings:
                         item.value.span,
                         "without births a fitted proposal could not leave a state far from "
                         "every fit; without fits it is a replace")
-                elif key in ("adapt", "anneal") and not (value >= 0 and value == int(value)):
-                    self.error(f"`{key}` is a number of sweeps, got {value:g}", item.value.span,
-                               "0 switches it off")
-                elif key == "merge_seeds" and not (value >= 0 and value == int(value)):
-                    self.error(f"`merge_seeds` is a number of seeds, got {value:g}",
-                               item.value.span, "0 searches from the merged objects alone")
-                elif key == "merge_polish" and not (value >= 0 and value == int(value)):
-                    self.error(f"`merge_polish` is a number of evaluations, got {value:g}",
-                               item.value.span, "0 switches it off")
+                elif key in _COUNTS and not (value >= 0 and value == int(value)):
+                    counted, hint = _COUNTS[key]
+                    self.error(f"`{key}` is a number of {counted}, got {value:g}",
+                               item.value.span, hint)
                 elif key == "tries" and not (value >= 1 and value == int(value)):
                     self.error(f"`tries` is a number of candidates, at least 1, got {value:g}",
                                item.value.span)
@@ -175,8 +176,7 @@ class Settings:
                     self.error(f"`{key}` is a power of the likelihood in (0, 1], got "
                                f"{value:g}", item.value.span)
                 else:
-                    if key in ("adapt", "anneal", "tries", "tempered", "merge_seeds",
-                               "merge_polish"):
+                    if key in _COUNTS or key in ("tries", "tempered"):
                         value = int(value)
                     self.inference_values[key] = value
 
