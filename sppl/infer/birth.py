@@ -47,15 +47,6 @@ COLOUR_GAP = 0.1
 # in ten million pixels).
 STRONG_COLOUR_GAP = 0.2
 STRONG_SIGMAS = 4.0
-# An object too small for a depth blob (a sphere 11 cm across, 4 m from a 96x96 camera,
-# covers two by two pixels) stands far nearer than what is drawn behind it: a speck of depth
-# pixels seeds when at least two neighbours agree and stand this many times the map's noise
-# nearer than the render at and around them. A speck has no erosion to weed out the noise's
-# stray pixels, and the map's noise estimate runs low (0.032 to 0.046 for shapes_plus's
-# 0.05): at 4 sigma, two neighbours of the far plane's noise seeded in a scene with every
-# object in place; at 6, one of 30 noise draws of the shapes_plus example seeds at its truth
-# (two neighbouring outliers, which the depth mixture draws anywhere in the range).
-SPECK_SIGMAS = 6.0
 # At most this many points describe a state (an even stride over the unexplained pixels), so
 # that the density costs microseconds.
 MAX_POINTS = 400
@@ -81,8 +72,6 @@ class BirthProposal:
         self.depth_gaps = {t.frame: max(DEPTH_GAP, 2.0 * depth_noise(t.observed, t.valid,
                                                                       t.camera.depth_max))
                            for t in self.terms if t.kind == "depth"}
-        self.speck_gaps = {t.frame: max(self.depth_gaps[t.frame], SPECK_SIGMAS * depth_noise(
-            t.observed, t.valid, t.camera.depth_max)) for t in self.terms if t.kind == "depth"}
         self._static_depth = None
         self.strong_gaps = {t.frame: max(STRONG_COLOUR_GAP,
                                          STRONG_SIGMAS * image_noise(t.observed))
@@ -125,18 +114,14 @@ class BirthProposal:
             dirs, ray_to_z, centre = self.rays[t.frame]
             rendered = self.scorer.rendered(renders, t)
             if t.kind == "depth":
-                gap = self.depth_gaps[t.frame]
-                flagged = t.observed < rendered - gap
-                flagged &= _measured(t.observed, t.valid, t.camera.depth_max)
-                blobs = _blobs(flagged)
-                strong = _depth_specks(flagged, blobs, t.observed, rendered,
-                                       self.speck_gaps[t.frame], gap)
-                near = blobs | strong
+                near = t.observed < rendered - self.depth_gaps[t.frame]
+                near &= _measured(t.observed, t.valid, t.camera.depth_max)
+                near = _blobs(near)
                 dist = t.observed[near]
                 if t.camera.depth_type == "z":
                     dist = dist / ray_to_z[near]
                 pts = centre + dirs[near] * dist[:, None]
-                strong = strong[near]
+                strong = np.zeros(len(pts), dtype=bool)
             elif t.kind == "image":
                 off = np.abs(t.observed - rendered).mean(axis=-1)
                 blobs = _blobs(off > COLOUR_GAP)
@@ -286,32 +271,6 @@ def _specks(flagged: np.ndarray, blobs: np.ndarray, strong: np.ndarray,
     keep[np.unique(labels[drawn])] = False
     keep[0] = False
     return keep[labels]
-
-
-def _depth_specks(flagged: np.ndarray, blobs: np.ndarray, observed: np.ndarray,
-                  rendered: np.ndarray, gap: float, agree_within: float) -> np.ndarray:
-    """The depth pixels of an object too small for a blob that stands in front of what the
-    state draws: of each piece of ``flagged`` (4-connected) with fewer than SEED_PIXELS
-    pixels of ``blobs``, the pixels nearer by ``gap`` than the render at and around them (at
-    each of the eight neighbours too) whose depth such a neighbour's agrees with (within
-    ``agree_within``), where at least two are. An edge the state draws a pixel off measures the
-    depth the render has beside it, so fails the first; a pixel of sensor outliers, drawn
-    anywhere in the camera's range, seldom has a neighbour that agrees with it."""
-    apart = flagged & (observed < ndimage.minimum_filter(rendered, size=3) - gap)
-    agree = np.zeros_like(flagged)
-    for axis in (0, 1):
-        n = flagged.shape[axis]
-        a, b = (slice(None),) * axis + (slice(1, n),), (slice(None),) * axis + (slice(0, n - 1),)
-        pair = apart[a] & apart[b] & (np.abs(observed[a] - observed[b]) < agree_within)
-        agree[a] |= pair
-        agree[b] |= pair
-    labels, count = ndimage.label(flagged, structure=_CROSS)
-    if not count:
-        return np.zeros_like(flagged)
-    keep = np.bincount(labels[agree], minlength=count + 1) >= 2
-    keep &= np.bincount(labels[blobs], minlength=count + 1) < SEED_PIXELS
-    keep[0] = False
-    return keep[labels] & agree
 
 
 def _edges(rendered: np.ndarray) -> np.ndarray:
