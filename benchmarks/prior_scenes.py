@@ -9,6 +9,7 @@ the truth's.
     python benchmarks/prior_scenes.py --model-file my.scn --models shapes   # other settings
     python benchmarks/prior_scenes.py --json run.json        # every row, with its MAP
     python benchmarks/prior_scenes.py --models tabletop --first 24   # scenes 24-29 only
+    python benchmarks/prior_scenes.py --models shapes_plus --only 1 4 --limit 180   # two, longer
 
 Scene i of a model has 2 + (i mod 5) objects and is drawn by ``scenes_in_view.draw_in_view``
 from the seed (--seed, model); it is rendered by ``sppl.runs.experiment.simulate`` with the noise of
@@ -81,7 +82,7 @@ def run_model(name: str, model_path: Path, args, work: Path) -> list[dict]:
     cameras = ROOT / "examples" / "models" / name / "cameras.json"
     rows = []
     for i, scene in enumerate(scenes_of(name, args.scenes, args.seed)):
-        if i < args.first:
+        if i < args.first or (args.only and i not in args.only):
             continue
         scene_file = work / f"{name}_{i}.json"
         scene_file.write_text(json.dumps(scene))
@@ -164,6 +165,9 @@ def main(argv=None) -> int:
     p.add_argument("--first", type=int, default=0,
                    help="run scenes from this one on (the same scenes: all are drawn), to finish "
                    "a run that stopped")
+    p.add_argument("--only", type=int, nargs="+", default=None, metavar="I",
+                   help="run only these of the scenes (numbered from 0), to look again at "
+                   "the ones a run left unsolved, with a longer --limit say")
     p.add_argument("--seed", type=int, default=SEED, help="the scenes' seed")
     p.add_argument("--chain-seed", type=int, default=0)
     p.add_argument("--chains", type=int, default=1,
@@ -179,6 +183,8 @@ def main(argv=None) -> int:
         p.error("--model-file needs exactly one --models")
     if args.chains < 1:
         p.error("--chains must be at least 1")
+    if args.only and not all(0 <= i < args.scenes for i in args.only):
+        p.error(f"--only takes scene numbers from 0 to {args.scenes - 1} (--scenes {args.scenes})")
     chains = "one chain" if args.chains == 1 else f"a run of {args.chains} chains"
     print(f"{args.scenes} scenes per model (seed {args.seed}), {chains} each (seed "
           f"{args.chain_seed}), at most {args.limit:.0f} CPU s per chain; MAP - truth: log "

@@ -47,14 +47,15 @@ def test_testbed_benchmark_report_and_figure(root, require_gl, tmp_path):
 
 
 def test_prior_scenes_benchmark_runs_and_draws_scenes_in_view(root, require_gl, tmp_path):
-    """benchmarks/prior_scenes.py on one scene for a few CPU seconds: its table and rows; and
-    its scenes hold 2, 3, ... objects, each a valid scene with every object in view."""
+    """benchmarks/prior_scenes.py on one scene (the second, chosen with --only) for a few CPU
+    seconds: its table and rows; and its scenes hold 2, 3, ... objects, each a valid scene
+    with every object in view."""
     run = tmp_path / "run.json"
-    out = bench(root, "prior_scenes.py", "--models", "shapes", "--scenes", "1", "--limit", "2",
-                "--check-every", "20", "--json", run)
+    out = bench(root, "prior_scenes.py", "--models", "shapes", "--scenes", "2", "--only", "1",
+                "--limit", "2", "--check-every", "20", "--json", run)
     assert "| shapes | " in out and "/1 |" in out
     rows = __import__("json").loads(run.read_text())
-    assert [(r["model"], r["objects"]) for r in rows] == [("shapes", 2)]
+    assert [(r["model"], r["scene"], r["objects"]) for r in rows] == [("shapes", 1, 3)]
 
     sys.path.insert(0, str(root / "benchmarks"))
     try:
