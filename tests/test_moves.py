@@ -176,3 +176,84 @@ def test_prior_recovery_of_the_count_is_quick_and_exact(false_alarm):
     expected = len(draws) * np.append(pmf, 1 - pmf.sum())
     _, p = stats.chisquare(observed, expected)
     assert p > false_alarm
+
+
+MATERIALS = ("rubber", "metal", "glass")
+
+
+def _two_categorical_class():
+    """A ball with a colour and a material, weighted unevenly, as blocks.scn's objects have."""
+    from toys import _sphere
+
+    from sppl import Categorical, Normal, ObjectClass, Parameter, Real
+
+    ball = ball_class()
+    return ObjectClass(
+        "ball", 1.0,
+        (Parameter("x", Real(), Normal(0.0, 2.0), 0.8),
+         ball.parameter("r"),
+         Parameter("c", Finite(("red", "blue")), Categorical(("red", "blue"), (0.3, 0.7))),
+         Parameter("m", Finite(MATERIALS), Categorical(MATERIALS, (0.6, 0.3, 0.1)))),
+        lambda v: _sphere({**v, "y": 0.0}),
+    )
+
+
+def test_parameter_blocks_add_a_joint_block_only_for_several_categoricals():
+    assert moves.parameter_blocks(_two_categorical_class()) == (
+        ("x", "r"), ("c",), ("m",), ("c", "m"))
+    assert moves.parameter_blocks(ball_class()) == (("x", "y", "r"), ("c",))
+
+
+@pytest.mark.false_alarm(EACH)
+def test_joint_step_is_uniform_over_the_other_combinations(false_alarm):
+    cls = _two_categorical_class()
+    params = [cls.parameter("c"), cls.parameter("m")]
+    rng = np.random.default_rng(3)
+    draws = [moves.joint_step(params, {"c": "blue", "m": "metal"}, rng) for _ in range(6000)]
+    combos = [(d["c"], d["m"]) for d in draws]
+    others = [(c, m) for c in ("red", "blue") for m in MATERIALS if (c, m) != ("blue", "metal")]
+    assert set(combos) == set(others)
+    _, p = stats.chisquare([combos.count(o) for o in others])
+    assert p > false_alarm
+
+
+def _joint_block_chain(seed=5, n=4000, thin=10):
+    """A chain of the joint block alone on one object with no observations: its draws of
+    (colour, material) must follow the prior, 0.3/0.7 times 0.6/0.3/0.1."""
+    cls = _two_categorical_class()
+    model = toy_model([cls])
+    sampler = prior_sampler(model, seed)
+    trace = sampler.initial_trace([make_object(model, cls, cls.sample_prior(sampler.rng))])
+    counts = {}
+    for _ in range(n):
+        for _ in range(thin):
+            trace = sampler.step(trace, moves.propose_parameters(model, trace, 0, ("c", "m"),
+                                                                  sampler.rng))
+        v = trace.objects[0].values
+        counts[v["c"], v["m"]] = counts.get((v["c"], v["m"]), 0) + 1
+    combos = [(c, m) for c in ("red", "blue") for m in MATERIALS]
+    prior = np.array([pc * pm for pc in (0.3, 0.7) for pm in (0.6, 0.3, 0.1)])
+    _, p = stats.chisquare([counts.get(o, 0) for o in combos], n * prior)
+    return p
+
+
+@pytest.mark.false_alarm(EACH)
+def test_joint_block_keeps_the_prior_and_a_lopsided_one_is_caught(false_alarm, monkeypatch):
+    """Draws ten steps apart: a chain on six states whose step goes anywhere forgets its
+    state within a few steps, so they are close to independent and the chi-square holds at
+    the marker's rate (the seed is fixed). A step that lands on the first colour more often
+    than its ratio says is far outside it."""
+    assert _joint_block_chain() > false_alarm
+    # A step that favours the first colour without saying so in the ratio: not symmetric.
+    right = moves.joint_step
+
+    def lopsided(params, values, rng):
+        drawn = right(params, values, rng)
+        if rng.random() < 0.3:
+            drawn["c"] = params[0].domain.values[0]
+        if drawn == {p.name: values[p.name] for p in params}:
+            return right(params, values, rng)
+        return drawn
+
+    monkeypatch.setattr(moves, "joint_step", lopsided)
+    assert _joint_block_chain() < false_alarm
