@@ -91,6 +91,48 @@ def test_the_fit_is_deterministic_and_improves_the_scene(require_gl):
             assert fit._score(sampler, state, cls, a) >= fit._score(sampler, state, cls, start)
 
 
+def test_the_fits_memo_changes_no_fit_and_saves_scores(require_gl, monkeypatch):
+    """Each point a fit scores twice is rendered once (a search's step back, the shared
+    starts); the fit is the same values as with every point rendered anew."""
+    from sppl.infer.chain import Sampler
+    from sppl.model.simulate import sample_noise, sample_objects
+
+    model = seen_world()
+    sim = verify.Simulator(model, verify.verify_cameras(model, 8), _renderer(model))
+    rng = np.random.default_rng(4)
+    objects = ()
+    while len(objects) < 2:
+        objects = sample_objects(model, rng)
+    noise = sample_noise(model, rng)
+    sampler = sim.sampler(sim.observe(sim.render(objects), noise, rng), rng, Sampler)
+    state = sampler.make_trace(objects[1:], noise)
+    real, calls = fit._score, []
+
+    def counted(*args):
+        calls.append(1)
+        return real(*args)
+
+    monkeypatch.setattr(fit, "_score", counted)
+    remembered = [fit.fit(sampler, state, cls, objects[0]) for cls in model.classes]
+    with_memo = len(calls)
+    # Every score the memo gives is the one a fresh render gives.
+    memo = fit._Scores.__call__
+
+    def checked(self, values):
+        s = memo(self, values)
+        assert s == real(self.sampler, self.state, self.cls, values), values
+        return s
+
+    monkeypatch.setattr(fit._Scores, "__call__", checked)
+    for cls in model.classes:
+        fit.fit(sampler, state, cls, objects[0])
+    monkeypatch.setattr(fit._Scores, "__call__",
+                        lambda self, values: counted(self.sampler, self.state, self.cls, values))
+    calls.clear()
+    assert [fit.fit(sampler, state, cls, objects[0]) for cls in model.classes] == remembered
+    assert with_memo < len(calls)
+
+
 def _renderer(model):
     from sppl.render import Renderer
 

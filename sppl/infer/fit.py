@@ -104,16 +104,35 @@ def _score(sampler, state: Trace, cls: ObjectClass, values) -> float:
     return -math.inf if new is None else new.score
 
 
+class _Scores:
+    """``_score`` of one class's objects in one state, each point scored once: a pattern
+    search steps back onto points it has scored, and the searches of one fit share their
+    starts (about one trial in nine is such a repeat). A repeat still counts as an
+    evaluation where a search counts them, so the fit is the same as without the memo."""
+
+    def __init__(self, sampler, state: Trace, cls: ObjectClass) -> None:
+        self.sampler, self.state, self.cls = sampler, state, cls
+        self.names = tuple(p.name for p in cls.parameters)
+        self.known: dict[tuple, float] = {}
+
+    def __call__(self, values) -> float:
+        key = tuple(values[n] for n in self.names)
+        s = self.known.get(key)
+        if s is None:
+            s = self.known[key] = _score(self.sampler, self.state, self.cls, values)
+        return s
+
+
 class _Search:
     """The best values found so far, and each trial's score against them."""
 
-    def __init__(self, sampler, state: Trace, cls: ObjectClass, values, best: float) -> None:
-        self.sampler, self.state, self.cls = sampler, state, cls
+    def __init__(self, score: _Scores, values, best: float) -> None:
+        self.score, self.cls = score, score.cls
         self.values, self.best, self.evaluations = values, best, 0
 
     def trial(self, name: str, value) -> bool:
         trial = {**self.values, name: value}
-        s = _score(self.sampler, self.state, self.cls, trial)
+        s = self.score(trial)
         self.evaluations += 1
         if s > self.best:
             self.values, self.best = trial, s
@@ -158,7 +177,7 @@ class _Search:
 
         def loss(z) -> float:
             values = values_at(z)
-            s = _score(self.sampler, self.state, self.cls, values)
+            s = self.score(values)
             self.evaluations += 1
             if s > self.best:
                 self.values, self.best = values, s
@@ -207,19 +226,20 @@ def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None, a
     the best search wins. With ``polish``, Powell's method then takes at most that many
     scores more (``_Search.polish``). Both keep the fit a deterministic function of its
     arguments and the state."""
+    score = _Scores(sampler, state, cls)
     starts = [v for o in (like, *also) for v in _starts(cls, o, keep)]
-    scores = [_score(sampler, state, cls, v) for v in starts]
+    scores = [score(v) for v in starts]
     best = max(scores)
     values = starts[scores.index(best)]
-    found = _search(sampler, state, cls, values, best)
+    found = _search(score, values, best)
     if seeds and cls.position:
         draws = [values, *_starts(cls, like, keep=())]
         for seed in sampler.birth.seeds(state)[:seeds]:
             moved = [{**v, cls.position[0]: float(seed[0]), cls.position[1]: float(seed[1])}
                      for v in draws]
-            scores = [_score(sampler, state, cls, v) for v in moved]
+            scores = [score(v) for v in moved]
             best = max(scores)
-            other = _search(sampler, state, cls, moved[scores.index(best)], best)
+            other = _search(score, moved[scores.index(best)], best)
             if other.best > found.best:
                 found = other
     if polish:
@@ -227,28 +247,28 @@ def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None, a
     return found.values
 
 
-def _search(sampler, state, cls, values, best) -> _Search:
+def _search(score: _Scores, values, best) -> _Search:
     """The search from ``values``; and, for each categorical parameter that shapes the
     object (``shaping``), once more from each of its other values, held there, the best
     search winning. A large sphere that a chain read as two small objects is fitted, from
     where they stand, as a small one: at their places the large one scores worse, and the
     search moves the size before it moves the place (blocks.scn's prior scene 8: the merge
     of the two as a large sphere gains 2,616 nats, as a small one fitted loses 544)."""
-    found = _held_search(sampler, state, cls, values, best, ())
+    cls = score.cls
+    found = _held_search(score, values, best, ())
     for name in shaping(cls):
         for value in cls.parameter(name).domain.values:
             if value == values[name]:
                 continue
             start = {**values, name: value}
-            other = _held_search(sampler, state, cls, start,
-                                 _score(sampler, state, cls, start), (name,))
+            other = _held_search(score, start, score(start), (name,))
             if other.best > found.best:
                 found = other
     return found
 
 
-def _held_search(sampler, state, cls, values, best, held) -> _Search:
-    search = _Search(sampler, state, cls, values, best)
+def _held_search(score: _Scores, values, best, held) -> _Search:
+    search = _Search(score, values, best)
     search.categorical(held)
     search.turns()
     search.pattern()
