@@ -32,6 +32,14 @@ def test_versions_compares_two_checkouts(root, require_gl):
     assert "| whole hypothesis |" in out and "| single-object move |" in out
 
 
+@pytest.mark.slow
+def test_chain_versions_runs_one_chain_in_each_checkout(root, require_gl):
+    out = bench(root, "chain_versions.py", root, root, "--model", "blocks", "--scene", "0",
+                "--sweeps", "5", "--rounds", "1")
+    assert "round 1: before" in out
+    assert "the same chain, step for step" in out
+
+
 def test_testbed_benchmark_report_and_figure(root, require_gl, tmp_path):
     """benchmarks/testbed.py on the empty-floor scene, a few sweeps (no objects to find: both
     renders are recovered at the first check), its --report of the run, and the figure."""
