@@ -68,21 +68,27 @@ def test_geweke_with_refits(false_alarm, require_gl):
     assert report.row("refit moves accepted").ok
 
 
-def test_the_fit_is_deterministic_and_improves_the_scene(require_gl):
-    """Fitted twice from the same scene it gives the same values, and they score at least as
-    well as where it started."""
+def _observed_scene(seed):
+    """A prior scene of two or more objects of ``seen_world`` observed by its cameras: the
+    model, a sampler given the observations, the objects, and the state without the first."""
     from sppl.infer.chain import Sampler
     from sppl.model.simulate import sample_noise, sample_objects
 
     model = seen_world()
     sim = verify.Simulator(model, verify.verify_cameras(model, 8), _renderer(model))
-    rng = np.random.default_rng(2)
+    rng = np.random.default_rng(seed)
     objects = ()
     while len(objects) < 2:
         objects = sample_objects(model, rng)
     noise = sample_noise(model, rng)
     sampler = sim.sampler(sim.observe(sim.render(objects), noise, rng), rng, Sampler)
-    state = sampler.make_trace(objects[1:], noise)
+    return model, sampler, objects, sampler.make_trace(objects[1:], noise)
+
+
+def test_the_fit_is_deterministic_and_improves_the_scene(require_gl):
+    """Fitted twice from the same scene it gives the same values, and they score at least as
+    well as where it started."""
+    model, sampler, objects, state = _observed_scene(2)
     for cls in model.classes:
         a = fit.fit(sampler, state, cls, objects[0])
         b = fit.fit(sampler, state, cls, objects[0])
@@ -94,18 +100,7 @@ def test_the_fit_is_deterministic_and_improves_the_scene(require_gl):
 def test_the_fits_memo_changes_no_fit_and_saves_scores(require_gl, monkeypatch):
     """Each point a fit scores twice is rendered once (a search's step back, the shared
     starts); the fit is the same values as with every point rendered anew."""
-    from sppl.infer.chain import Sampler
-    from sppl.model.simulate import sample_noise, sample_objects
-
-    model = seen_world()
-    sim = verify.Simulator(model, verify.verify_cameras(model, 8), _renderer(model))
-    rng = np.random.default_rng(4)
-    objects = ()
-    while len(objects) < 2:
-        objects = sample_objects(model, rng)
-    noise = sample_noise(model, rng)
-    sampler = sim.sampler(sim.observe(sim.render(objects), noise, rng), rng, Sampler)
-    state = sampler.make_trace(objects[1:], noise)
+    model, sampler, objects, state = _observed_scene(4)
     real, calls = fit._score, []
 
     def counted(*args):
