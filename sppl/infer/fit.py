@@ -282,9 +282,10 @@ _SHAPING: dict[int, tuple[ObjectClass, tuple[str, ...]]] = {}
 
 
 def shaping(cls: ObjectClass) -> tuple[str, ...]:
-    """The categorical parameters of ``cls`` that its geometry depends on (a size of small or
-    large), not only its colours: those whose other values change the parts' primitives or
-    poses at a few fixed draws of the prior. Worked out once per class."""
+    """The categorical parameters of ``cls`` that shape it (blocks.scn's size, small or
+    large), as against those that only colour it or set its material: those whose other
+    values change its parts' primitives or poses at three fixed draws of its prior. Worked
+    out once per class."""
     known = _SHAPING.get(id(cls))
     if known is not None and known[0] is cls:
         return known[1]
