@@ -228,10 +228,9 @@ def propose_parameters(
     params = [old.cls.parameter(name) for name in names]
     if len(params) > 1 and all(isinstance(p.domain, Finite) for p in params):
         values.update(joint_step(params, values, rng))
-        names = ()
-    for name in names:
-        p = old.cls.parameter(name)
-        values[name] = p.domain.step(values[name], p.proposal_scale * factor, rng)
+    else:
+        for p in params:
+            values[p.name] = p.domain.step(values[p.name], p.proposal_scale * factor, rng)
     obj = make_object(model, old.cls, values)
     objects = trace.objects[:k] + (obj,) + trace.objects[k + 1 :]
     return Proposal("parameters", old.cls.name, objects, trace.noise, (obj,))
