@@ -91,6 +91,35 @@ def test_the_partner_is_chosen_by_distance():
     assert logw[2] > logw[1] - 1e-9 and logw[2] > math.log(0.45)
 
 
+def test_the_partner_is_chosen_by_colour():
+    """Of two partners equally near, the one of the merged-away object's colour is the likelier
+    by the colour term, exp(-|c_i - c_j|^2 / (2 COLOUR^2)) of their mean part colours: the
+    pieces a chain made of one object share its colour."""
+    from sppl import Part, scaling, translation
+    from sppl.model.trace import make_object
+
+    rgb = {"red": (0.8, 0.15, 0.12), "blue": (0.15, 0.3, 0.8)}
+
+    def coloured(v):
+        r = v["r"]
+        return (Part("sphere", translation(v["x"], v["y"], 0) @ scaling(r, r, r), rgb[v["c"]]),)
+
+    cls = dataclasses.replace(placed(ball_class(rate=1.0)), build=coloured)
+    model = toy_model([cls])
+    objs = tuple(make_object(model, cls, {"x": x, "y": 0.0, "r": 0.2, "c": c})
+                 for x, c in ((0.0, "red"), (0.3, "red"), (-0.3, "blue")))
+    logw = merge.partner_log_weights(objs, 0)
+    assert math.isclose(np.exp(logw).sum(), 1.0)
+    gap = sum((a - b) ** 2 for a, b in zip(rgb["red"], rgb["blue"]))
+    expected = -0.5 * gap / merge.COLOUR**2
+    assert expected < -5.0
+    assert math.isclose(logw[2] - logw[1], expected, abs_tol=1e-9)
+    # Where the colours are the same, distance alone decides, as before.
+    same = tuple(make_object(model, cls, {**o.values, "c": "red"}) for o in objs)
+    logw = merge.partner_log_weights(same, 0)
+    assert math.isclose(logw[2], logw[1], abs_tol=1e-9)
+
+
 def test_every_merge_and_split_and_its_reverse(require_gl):
     """Against observations: the reverse, through the same scene without the objects, gives
     back the trace with minus the log ratio."""
