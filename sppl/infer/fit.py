@@ -220,8 +220,7 @@ def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None, a
     turns and the search once more where the turns still improve the fit (the first ones were
     tried at a size and place that were off), and the categorical parameters again.
 
-    With objects ``also``, the same search also runs from where they gather (``_gathered``),
-    the better search winning. With ``seeds``, the same search also runs from each of that many of the state's seeds
+    With ``seeds``, the same search also runs from each of that many of the state's seeds
     (its largest blobs of unexplained pixels, ``BirthProposal.seeds``), starting from the
     best of the first start's values and START_DRAWS fixed prior draws, each moved there;
     the best search wins. With ``polish``, Powell's method then takes at most that many
@@ -233,9 +232,6 @@ def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None, a
     best = max(scores)
     values = starts[scores.index(best)]
     found = _search(score, values, best)
-    other = _gathered(score, values, like, also)
-    if other is not None and other.best > found.best:
-        found = other
     if seeds and cls.position:
         draws = [values, *_starts(cls, like, keep=())]
         for seed in sampler.birth.seeds(state)[:seeds]:
@@ -249,29 +245,6 @@ def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None, a
     if polish:
         found.polish(polish)
     return found.values
-
-
-def _gathered(score: _Scores, values, like: SceneObject, also) -> _Search | None:
-    """The search from where ``like`` and the objects ``also`` gather (the mean of their
-    ground positions), from the best of ``values`` and fixed prior draws moved there; None
-    without objects ``also`` or positions.
-
-    The objects a merge takes over may be the pieces of one large object, whose centre none
-    of them holds: a search from the likeliest start, at the largest piece, grows the object
-    where that piece stands. On shapes.scn's prior scene 12 a chain read a large green cone as
-    five pieces, and the merge of all five fitted a cone 6,000 nats below the true one, 1,550
-    below the pieces; searched from where they gather, the same merge gains 3,300."""
-    cls = score.cls
-    placed = [(o.values[o.cls.position[0]], o.values[o.cls.position[1]])
-              for o in (like, *also) if o.cls.position]
-    if not (also and cls.position and placed):
-        return None
-    x, y = np.mean(placed, axis=0)
-    moved = [{**v, cls.position[0]: float(x), cls.position[1]: float(y)}
-             for v in (values, *_starts(cls, like, keep=()))]
-    scores = [score(v) for v in moved]
-    best = max(scores)
-    return _search(score, moved[scores.index(best)], best)
 
 
 def _search(score: _Scores, values, best) -> _Search:

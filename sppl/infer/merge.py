@@ -6,8 +6,7 @@ object at a time: the death of either small cube uncovers half the cube's pixels
 thousands of nats, and a refit of either is fitted with the other still there, so it fits the
 half that is left. A merge removes object i and refits object j in the scene without both,
 so the fit can grow j over the pixels i explained (its search starts from the best of j's
-values and those of the objects taken away, as a fit of each class would start from them,
-and again from where they all gather, ``sppl.infer.fit``):
+values and those of the objects taken away, as a fit of each class would start from them):
 
     merge (x- + i + j -> x- + y): i uniform among the n objects, j among the others with
         probability w(i, j) / sum_l w(i, l), where w(i, j) = exp(-|p_i - p_j|^2 / (2 R^2))
