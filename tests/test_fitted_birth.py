@@ -21,6 +21,8 @@ from sppl.infer import fit as fitting
 from sppl.infer import fitted_birth, moves
 from sppl.infer.chain import Sampler
 from sppl.model.trace import make_object
+from sppl.verify import proposals
+from sppl.verify.report import ALPHA, Report
 
 
 def with_fitted(model, weight=3.0):
@@ -104,6 +106,24 @@ def test_a_fitted_birth_finds_the_missing_object(setting):  # noqa: F811
     assert hits >= 2 and accepted >= 1
 
 
+def test_a_fitted_birth_chooses_the_class_that_fits(setting):  # noqa: F811
+    """With the blue sphere missing, the class choice at the seed nearest it puts nearly all
+    of its probability on the sphere (its fit explains the blob best), and every class keeps
+    at least the uniform share."""
+    model, truth, shared = setting
+    sampler = Sampler(with_fitted(model), shared.scorer, np.random.default_rng(1))
+    state = sampler.make_trace(truth[:1], {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}})
+    seeds = sampler.birth.seeds(state)
+    sphere = truth[1]
+    near = int(np.argmin(np.hypot(*(seeds - (sphere.values["x"], sphere.values["y"])).T)))
+    fits, log_p = fitted_birth.class_choice(sampler, state, seeds[near])
+    classes = [c.name for c in fitted_birth.placed_classes(model)]
+    assert math.isclose(np.exp(log_p).sum(), 1.0)
+    assert np.exp(log_p[classes.index("sphere")]) > 0.9, dict(zip(classes, np.exp(log_p)))
+    assert np.all(log_p >= math.log(fitted_birth.UNIFORM / len(classes)) - 1e-12)
+    assert fits[classes.index("sphere")]["c"] == sphere.values["c"]
+
+
 def test_the_seed_choice_is_a_distribution_that_prefers_the_nearest():
     model = with_fitted(seen_world())
     ball = model.classes[0]
@@ -157,6 +177,28 @@ def test_the_exact_posterior_sees_a_fitted_density_left_out(require_gl, monkeypa
     report = tile_report()
     assert not report.passed, report.table()
     assert report.row("objects in the scene").p_value < 1e-8, report.table()
+
+
+def class_report(setting):  # noqa: F811
+    model, truth, shared = setting
+    sampler = Sampler(with_fitted(model), shared.scorer, np.random.default_rng(1))
+    state = sampler.make_trace(truth[:1], {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}})
+    return Report(proposals.fitted_class_rows(sampler, state, np.random.default_rng(0), 1000),
+                  ALPHA)
+
+
+def test_the_classes_drawn_match_their_probabilities(setting):  # noqa: F811
+    """False alarm 1e-3 (Holm), as the other proposal checks (tests/test_proposal_checks.py)."""
+    report = class_report(setting)
+    assert len(report.rows) == 2 and report.passed, report.table()
+
+
+def test_a_class_choice_left_out_of_the_ratio_is_caught(setting, monkeypatch):  # noqa: F811
+    """The class drawn by its fit but its probability in the ratios uniform, as before the
+    choice by fit: the chi-square of the classes drawn fails."""
+    monkeypatch.setattr(fitted_birth, "class_log_prob", lambda log_p, c: -math.log(len(log_p)))
+    report = class_report(setting)
+    assert min(r.p_value for r in report.rows) < 1e-6, report.table()
 
 
 @pytest.mark.slow

@@ -212,6 +212,12 @@ class _Search:
 
 def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None, also=(),
         seeds: int = 0, polish: int = 0) -> dict[str, Any]:
+    """The fitted values (``scored_fit``'s, without their score)."""
+    return scored_fit(sampler, state, cls, like, keep, also, seeds, polish)[0]
+
+
+def scored_fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None,
+               also=(), seeds: int = 0, polish: int = 0) -> tuple[dict[str, Any], float]:
     """The deterministic fit of a ``cls`` object into ``state``, from ``like``'s values (those
     named in ``keep``, if given) or those of the objects ``also`` (a merge's others, whose
     pixels the fit takes over): the best of the starts, each categorical parameter set to
@@ -225,7 +231,8 @@ def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None, a
     best of the first start's values and START_DRAWS fixed prior draws, each moved there;
     the best search wins. With ``polish``, Powell's method then takes at most that many
     scores more (``_Search.polish``). Both keep the fit a deterministic function of its
-    arguments and the state."""
+    arguments and the state. Returned with the fit: the log joint of the state with the
+    fitted object in it (-inf where no start had a finite one)."""
     score = _Scores(sampler, state, cls)
     starts = [v for o in (like, *also) for v in _starts(cls, o, keep)]
     scores = [score(v) for v in starts]
@@ -244,7 +251,7 @@ def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None, a
                 found = other
     if polish:
         found.polish(polish)
-    return found.values
+    return found.values, found.best
 
 
 def _search(score: _Scores, values, best) -> _Search:

@@ -13,9 +13,9 @@ directly, with the very functions the moves call to draw from it and to score it
   conditional probability integral transform u = F(v_j | the draw's other coordinates), F
   computed from the proposal's own log density by quadrature along that coordinate (by sums
   over a categorical one, randomised within the atom). If the density is the sampler's, every
-  u is uniform (Rosenblatt); Kolmogorov-Smirnov tests it. For a merge partner and the object a
-  refit replaces (discrete choices), chi-square of the choices against the probabilities the
-  ratio uses.
+  u is uniform (Rosenblatt); Kolmogorov-Smirnov tests it. For a merge partner, the object a
+  refit replaces and a fitted birth's class (discrete choices), chi-square of the choices
+  against the probabilities the ratio uses.
 - ``importance identity``: for a normalised reference density r that is zero outside a
   bounded region B (a normal truncated to B, around what the proposal aims at, times the
   prior of the coordinates the proposal draws from the prior), E_{v ~ sampler}[r(v) / q(v)]
@@ -36,7 +36,7 @@ import numpy as np
 from scipy import stats
 
 from ..infer import fit as fitting
-from ..infer import merge, misfit
+from ..infer import fitted_birth, merge, misfit
 from ..infer.chain import Sampler
 from ..model.domains import Finite, Integer, Interval, Periodic
 from ..model.trace import SceneObject, Trace, make_object
@@ -364,6 +364,31 @@ def refit_choice_rows(sampler: Sampler, trace: Trace, rng: np.random.Generator,
                          lambda k: -math.log(n))]
 
 
+def fitted_class_rows(sampler: Sampler, state: Trace, rng: np.random.Generator,
+                      draws: int) -> list[Row]:
+    """The classes a fitted birth into ``state`` chooses at its first seed
+    (``fitted_birth.draw_class``), against ``fitted_birth.class_log_prob`` (what its ratio,
+    and its death's, use): chi-square over the classes (bins pooled to expected counts of at
+    least 5), and E[r/q] = 1 with r uniform. No rows where ``state`` has no seed."""
+    from .statistics import chisquare_gof
+
+    seeds = sampler.birth.seeds(state)
+    if not len(seeds):
+        return []
+    _, log_p = fitted_birth.class_choice(sampler, state, seeds[0])
+    k = len(log_p)
+    log_q = np.array([fitted_birth.class_log_prob(log_p, c) for c in range(k)])
+    chosen = np.array([fitted_birth.draw_class(rng, log_p) for _ in range(draws)])
+    observed = np.bincount(chosen, minlength=k).astype(float)
+    label = f"fitted birth's class of {k}"
+    chi2, p = chisquare_gof(observed, np.exp(log_q) / np.exp(log_q).sum())
+    return [Row("proposals", f"{label}: classes",
+                "chosen with the ratio's probabilities (chi-square)",
+                f"chi2={chi2:.1f}, n={draws}", p),
+            identity_row("proposals", label, list(chosen), lambda c: float(log_q[c]),
+                         lambda c: -math.log(k))]
+
+
 def _from_uniform(counts: np.ndarray) -> float | None:
     """The chi-square distance of a pilot's counts of each option from uniform; None where
     an option was drawn fewer than twice (a wrong density would not show there)."""
@@ -454,8 +479,9 @@ def check_proposals(model: Model, *, seed=0, size: int = 16, draws: int = 150,
     """The sampler-against-density rows and the importance identity of every data-dependent
     proposal the model's sampler makes, on observations simulated from a prior scene:
     the data-driven birth of each class with a position, the refit of the missing object as
-    each class (where refits, merges or splits are on), and merge partners (where merges or
-    splits are on). Rows of proposals that are off, or that no state exercised, are left out
+    each class (where refits, merges or splits are on), a fitted birth's class (where fitted
+    births are on, with two or more classes) and merge partners (where merges or splits are
+    on). Rows of proposals that are off, or that no state exercised, are left out
     and named in the notes."""
     if not model.sensors:
         return Report([], alpha, [("proposals: the model has no sensors; no proposal looks at "
@@ -491,6 +517,13 @@ def check_proposals(model: Model, *, seed=0, size: int = 16, draws: int = 150,
                          "of object any doubt; the choice untested.")
         else:
             rows += refit_choice_rows(sampler, chosen, rng, partner_draws)
+    if _uses(sampler, "fitted_birth", "fitted_death") and \
+            len(fitted_birth.placed_classes(model)) > 1:
+        classes = fitted_class_rows(sampler, state, rng, partner_draws)
+        if not classes:
+            notes.append("proposals: the scene less one object left no seed for a fitted "
+                         "birth; its choice of class untested.")
+        rows += classes
     if _uses(sampler, "merge", "split"):
         crowded = crowded_state(sampler, state.noise, rng)
         if crowded is None:
