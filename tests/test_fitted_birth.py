@@ -120,7 +120,7 @@ def test_a_fitted_birth_chooses_the_class_that_fits(setting):  # noqa: F811
     classes = [c.name for c in fitted_birth.placed_classes(model)]
     assert math.isclose(np.exp(log_p).sum(), 1.0)
     assert np.exp(log_p[classes.index("sphere")]) > 0.9, dict(zip(classes, np.exp(log_p)))
-    assert np.all(log_p >= math.log(fitted_birth.UNIFORM / len(classes)) - 1e-12)
+    assert np.all(log_p >= math.log(fitting.UNIFORM / len(classes)) - 1e-12)
     assert fits[classes.index("sphere")]["c"] == sphere.values["c"]
 
 
@@ -196,7 +196,7 @@ def test_the_classes_drawn_match_their_probabilities(setting):  # noqa: F811
 def test_a_class_choice_left_out_of_the_ratio_is_caught(setting, monkeypatch):  # noqa: F811
     """The class drawn by its fit but its probability in the ratios uniform, as before the
     choice by fit: the chi-square of the classes drawn fails."""
-    monkeypatch.setattr(fitted_birth, "class_log_prob", lambda log_p, c: -math.log(len(log_p)))
+    monkeypatch.setattr(fitting, "class_log_prob", lambda log_p, c: -math.log(len(log_p)))
     report = class_report(setting)
     assert min(r.p_value for r in report.rows) < 1e-6, report.table()
 

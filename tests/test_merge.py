@@ -14,6 +14,7 @@ from test_verify import seen_world
 from toys import ball_class, block_class, toy_model
 
 from sppl import verify
+from sppl.infer import fit as fitting
 from sppl.infer import merge
 
 
@@ -49,6 +50,43 @@ def test_prior_recovery_sees_a_newborn_taken_for_free(monkeypatch):
     monkeypatch.setattr(merge, "log_q_born", lambda sampler, obj, state: 0.0)
     report = verify.prior_recovery(prior_model(), sweeps=15000, seed=3, alpha=EACH)
     assert not report.passed, report.table()
+
+
+def test_the_merged_class_is_weighed_in_both_ratios(monkeypatch):
+    """The merged object's class is drawn by ``fit.draw_class`` from ``merged_fits``'s
+    probabilities (their draws are checked against ``fit.class_log_prob`` by sppl verify,
+    tests/test_fitted_birth.py); here, that a merge's ratio divides by exactly the drawn
+    class's probability, and its split's reverse density multiplies by that of the class it
+    splits, the same function of x- and the merged objects both ways."""
+    from sppl.infer.chain import Sampler
+    from sppl.model.trace import make_object
+    from sppl.scoring.scorer import PriorScorer
+
+    model = prior_model()
+    ball, block = model.classes
+    objects = (make_object(model, ball, {"x": 0.0, "y": 0.0, "r": 0.3, "c": "red"}),
+               make_object(model, block, {"x": 0.9, "y": 0.2, "a": 0.1, "s": 0.4, "c": "blue"}))
+    sampler = Sampler(model, PriorScorer(), np.random.default_rng(0))
+    trace = sampler.make_trace(objects, {})
+    empty = sampler.make_trace((), {})
+    _, log_p = merge.merged_fits(sampler, empty, objects[1], [objects[0]])
+    assert not np.allclose(log_p, log_p[0])  # the fits tell the classes apart
+
+    def proposals():
+        p = merge.propose_merge(sampler, trace, np.random.default_rng(4), i=0, j=1, more=())
+        after = sampler.make_trace(p.objects, {})
+        back = p.tries.reverse(sampler, trace, p, after)
+        return p, back
+
+    right, right_back = proposals()
+    right_deferred = right_back.deferred()
+    monkeypatch.setattr(fitting, "class_log_prob", lambda log_p, c: 0.0)
+    left, left_back = proposals()
+    c = model.classes.index(right.changed[0].cls)
+    assert left.changed[0].values == right.changed[0].values
+    assert math.isclose(right.log_q_ratio - left.log_q_ratio, -log_p[c], abs_tol=1e-9)
+    # The split back to the two objects: its reverse is this merge, the same choice.
+    assert math.isclose(right_deferred - left_back.deferred(), log_p[c], abs_tol=1e-9)
 
 
 @pytest.mark.false_alarm(EACH)
@@ -150,12 +188,19 @@ def test_a_split_whose_reverse_fits_less_far_is_caught(require_gl, monkeypatch):
     refit's search while the merge searched further. Some merge or split is then no longer
     undone with minus its log ratio."""
     model = searching(with_merges(seen_world()), polish=40)
-    plain = merge.fitting.refitted_back
+    right = merge.merged_back
 
-    def back(sampler, state, old, new, also=(), seeds=0, polish=0):
-        return plain(sampler, state, old, new, also=also)
+    def back(sampler, state, old, like, also):
+        deferred, bound = right(sampler, state, old, like, also)
 
-    monkeypatch.setattr(merge.fitting, "refitted_back", back)
+        def plain():
+            with monkeypatch.context() as m:
+                m.setattr(merge, "merge_search", lambda sampler: {})
+                return deferred()
+
+        return plain, bound
+
+    monkeypatch.setattr(merge, "merged_back", back)
     report = verify.move_checks(model, states=12, seed=5)
     failed = {r.quantity for r in report.rows if not r.ok}
     assert failed & {"merge: reverse undoes it", "split: reverse undoes it"}, report.table()

@@ -50,14 +50,6 @@ from .moves import Proposal, _log
 # uniform, so that every seed keeps a chance (a fit can wander from its seed).
 RADIUS = 0.5
 FLOOR = 0.1
-# A fitted birth's class is the one whose fit explains the blob best, but for this share of
-# births, whose class is uniform. With the class uniform, the first object a chain fitted to
-# a large cone was as often a cube, a cylinder or a sphere, each accepted (anything explains
-# the blob better than nothing), and the cone's pixels the cube leaves were then explained by
-# pieces that no later single move could take back (shapes_plus.scn's prior scene 16: a cone
-# fitted at the first seed scores 42,181 against the empty scene, a cube 19,110, a cylinder
-# 23,382). The share keeps every class proposable where the fits rank them wrong.
-UNIFORM = 0.05
 
 
 def placed_classes(model) -> tuple[ObjectClass, ...]:
@@ -84,28 +76,11 @@ def fit_at(sampler, state: Trace, cls: ObjectClass, seed) -> tuple[dict, float]:
 
 
 def class_choice(sampler, state: Trace, seed) -> tuple[list[dict], np.ndarray]:
-    """Every placed class fitted at the seed, and log P(c | x, s) of choosing each:
-    (1 - UNIFORM) times the softmax of their fits' log joints, plus UNIFORM / K."""
-    classes = placed_classes(sampler.model)
-    fits, scores = zip(*(fit_at(sampler, state, cls, seed) for cls in classes))
-    scores = np.array(scores)
-    if not np.isfinite(scores).any():
-        by_fit = np.full(len(classes), -math.log(len(classes)))
-    else:
-        by_fit = scores - np.logaddexp.reduce(scores)
-    log_p = np.logaddexp(math.log1p(-UNIFORM) + by_fit, math.log(UNIFORM / len(classes)))
-    return list(fits), log_p
-
-
-def draw_class(rng: np.random.Generator, log_p: np.ndarray) -> int:
-    """A class drawn from ``class_choice``'s probabilities."""
-    return int(rng.choice(len(log_p), p=np.exp(log_p - np.logaddexp.reduce(log_p))))
-
-
-def class_log_prob(log_p: np.ndarray, c: int) -> float:
-    """log P(c | x, s) in a fitted birth's density and its death's, from ``class_choice``
-    (looked up when called, so that a test can put a wrong one in its place)."""
-    return float(log_p[c])
+    """Every placed class fitted at the seed, and log P(c | x, s) of choosing each
+    (``fit.class_log_probs`` of their fits' log joints)."""
+    fits, scores = zip(*(fit_at(sampler, state, cls, seed)
+                         for cls in placed_classes(sampler.model)))
+    return list(fits), fitting.class_log_probs(scores)
 
 
 @dataclass(frozen=True)
@@ -146,7 +121,7 @@ def propose_fitted_birth(sampler, trace: Trace, rng: np.random.Generator,
         return None
     s = int(rng.integers(len(seeds))) if seed is None else seed
     fits, log_p = class_choice(sampler, state, seeds[s])
-    c = draw_class(rng, log_p) if target is None else classes.index(target.cls)
+    c = fitting.draw_class(rng, log_p) if target is None else classes.index(target.cls)
     cls, fitted = classes[c], fits[c]
     obj = target if target is not None else make_object(model, cls,
                                                         fitting.draw(cls, fitted, rng))
@@ -157,7 +132,7 @@ def propose_fitted_birth(sampler, trace: Trace, rng: np.random.Generator,
     if not math.isfinite(obj.log_prior):
         return Proposal("fitted_birth", cls.name, objects, trace.noise, (obj,), -math.inf,
                         tries=tag)
-    log_q_forward = (_log(sampler.jump["fitted_birth"]) + class_log_prob(log_p, c)
+    log_q_forward = (_log(sampler.jump["fitted_birth"]) + fitting.class_log_prob(log_p, c)
                      - math.log(len(seeds)) + fitting.log_density(cls, obj.values, fitted))
     log_q_back = (_log(sampler.jump["fitted_death"]) - math.log(n)
                   + float(seed_log_probs(seeds, obj)[s]))
@@ -193,7 +168,7 @@ def propose_fitted_death(sampler, trace: Trace, rng: np.random.Generator, k: int
     def back() -> float:
         fits, log_p = class_choice(sampler, state, seeds[s])
         c = classes.index(gone.cls)
-        return class_log_prob(log_p, c) + fitting.log_density(gone.cls, gone.values, fits[c])
+        return fitting.class_log_prob(log_p, c) + fitting.log_density(gone.cls, gone.values, fits[c])
 
     return Proposal(
         "fitted_death", gone.cls.name, rest, trace.noise, (), log_q_back - log_q_forward,

@@ -13,23 +13,25 @@ values and those of the objects taken away, as a fit of each class would start f
         with p an object's ground position, or exp(-g^2 / (2 P^2)) with g the pixels between
         the two objects' rectangles in the camera where they are nearest, whichever is larger
         (1 where neither applies), times exp(-|c_i - c_j|^2 / (2 S^2)) with c an object's
-        mean part colour, and y from the refit proposal of a uniform class into
-        x- starting from j or i (sppl.infer.fit: the better start);
+        mean part colour, and y from the refit proposal into x- starting from j or i
+        (sppl.infer.fit: the better start) of a class c chosen by the fits of every class
+        so started, with probability P(c | x-, i, j) (``merged_fits``: 0.95 times the
+        softmax of their log joints, plus 0.05 / K);
     split (x- + y -> x- + i + j): y uniform among the n - 1 objects, j from the refit proposal
         of a uniform class into x- = the scene without y, starting from y, and i a birth of a
         uniform class into x- (sppl.infer.birth: near what x- leaves unexplained, or the prior).
 
 A split is a merge's reverse: both go through the same x-, so the fits that the densities
-depend on are the same both ways (the split's reverse fits y from its fitted j and its
-newborn i), and with K classes
+depend on are the same both ways (the split's reverse fits y, as every class, from its fitted
+j and its newborn i), and with K classes
 
     log alpha_merge = log pi(x- + y) - log pi(x- + i + j)
-                      + log P(split) - log(n - 1) - log K + log q_fit(j | x-, y)
+                      + log P(split) - log(n - 1) - 2 log K + log q_fit(j | x-, y)
                       + log q_birth(i | x-)
                       - log P(merge) + log n - log w(i, j) + log sum_l w(i, l)
-                      - log q_fit(y | x-, j, i)
+                      - log P(c_y | x-, i, j) - log q_fit(y | x-, j, i)
 
-(the class choices: one K for y's, two for j's and i's). Which object is born and which is
+(the split's class choices are uniform: a K each for j's and i's). Which object is born and which is
 fitted are roles the move chooses, not part of the scene; a merge with its roles is undone by
 exactly one split with the same roles, which is all detailed balance needs. The places in the
 tuple are uniform, as for a birth, and carry no density. docs/inference.md has the derivation.
@@ -192,6 +194,31 @@ def _refitted(sampler, state: Trace, like: SceneObject, rng: np.random.Generator
     return target, forward
 
 
+def merged_fits(sampler, state: Trace, like: SceneObject, also) -> tuple[list[dict], np.ndarray]:
+    """The merged object fitted as each class of the model into ``state`` (x-), from ``like``
+    and the objects ``also`` (``merge_search``), and log P(c | x-, the merged objects) of
+    choosing each class (``fit.class_log_probs`` of the fits' log joints): a function of x-
+    and the merged objects, the same in a merge and in a split's reverse."""
+    search = merge_search(sampler)
+    fits, scores = zip(*(fitting.scored_fit(sampler, state, cls, like, also=also, **search)
+                         for cls in sampler.model.classes))
+    return list(fits), fitting.class_log_probs(scores)
+
+
+def merged_back(sampler, state: Trace, old: SceneObject, like: SceneObject, also):
+    """The reverse density of a split of ``old`` into ``like`` and the newborns ``also``, the
+    merge's class choice and log q_mixture(old | its class's fit), deferred: the function
+    that computes it (a fit of every class), and an upper bound of it (no fit needed: the
+    choice's log probability is at most 0)."""
+    def back() -> float:
+        fits, log_p = merged_fits(sampler, state, like, also)
+        c = sampler.model.classes.index(old.cls)
+        return fitting.class_log_prob(log_p, c) + fitting.log_mixture(
+            sampler, state, old.cls, old.values, fits[c])
+
+    return back, fitting.log_mixture_bound(sampler, state, old.cls, old.values)
+
+
 def taken_counts(n: int) -> int:
     """How many numbers of merged-away objects a merge of ``n`` objects chooses among: 1 to
     MAX_TAKEN, and at most n - 1."""
@@ -235,8 +262,8 @@ def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None
                   ) -> Proposal | None:
     """Merge object i (uniform), and with it MORE - 1 further objects near j (MORE in
     1..``taken_counts``, ``draw_count``), into object j (near i) as a fitted object of a
-    uniform class; given ``target`` (and ``more``), the proposal of exactly that object (a
-    split's reverse)."""
+    class chosen by fit (``merged_fits``); given ``target`` (and ``more``), the proposal of
+    exactly that object (a split's reverse)."""
     objects = trace.objects
     n = len(objects)
     if n < 2:
@@ -260,9 +287,11 @@ def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None
     gone, old = [objects[p] for p in taken], objects[j]
     rest = _without(objects, j, *taken)
     state = state if state is not None else sampler.make_trace(rest, trace.noise)
-    new, forward = _refitted(sampler, state, old, rng, target, also=gone,
-                             search=merge_search(sampler))
-    cls = new.cls
+    fits, log_p = merged_fits(sampler, state, old, gone)
+    c = fitting.draw_class(rng, log_p) if target is None else model.classes.index(target.cls)
+    cls, forward = model.classes[c], fits[c]
+    new = target if target is not None else make_object(
+        model, cls, fitting.sample(sampler, state, cls, forward, rng))
     merged = tuple(new if p == j else o for p, o in enumerate(objects) if p not in taken)
     tag = MergeSplit(state, j, taken)
     if not math.isfinite(new.log_prior):
@@ -270,7 +299,7 @@ def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None
     log_q_forward = (_log(sampler.jump["merge"]) - math.log(n)
                      + count_log_prob(len(taken), taken_counts(n))
                      + chosen_log_prob(logw, logw_j, i, j, more)
-                     - math.log(n_classes)
+                     + fitting.class_log_prob(log_p, c)
                      + fitting.log_mixture(sampler, state, cls, new.values, forward))
     # log q(reverse), less the fitted density of old, which is deferred (Sampler.decide).
     log_q_back = (_log(sampler.jump["split"]) - math.log(len(merged))
@@ -332,11 +361,11 @@ def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None
     i, more = born_places[0], born_places[1:]
     logw = partner_log_weights(split, i, screen)
     logw_j = partner_log_weights(split, j, screen)
-    # log q(reverse), less the fitted density of old, which is deferred (Sampler.decide).
+    # log q(reverse), less the merge's class choice and fitted density of old, which are
+    # deferred (Sampler.decide).
     log_q_back = (_log(sampler.jump["merge"]) - math.log(n)
                   + count_log_prob(len(born), taken_counts(n))
-                  + chosen_log_prob(logw, logw_j, i, j, more) - math.log(n_classes))
-    back, bound = fitting.refitted_back(sampler, state, old, fitted, also=born,
-                                          **merge_search(sampler))
+                  + chosen_log_prob(logw, logw_j, i, j, more))
+    back, bound = merged_back(sampler, state, old, fitted, born)
     return Proposal("split", old.cls.name, split, trace.noise, (fitted, *born),
                     log_q_back - log_q_forward, tries=tag, deferred=back, deferred_bound=bound)

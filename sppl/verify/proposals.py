@@ -282,18 +282,18 @@ def merge_partner(sampler: Sampler, trace: Trace, i: int, rng: np.random.Generat
     """The partner ``merge.propose_merge`` chooses for object i of ``trace``: the move's own
     code run up to the choice, and stopped where its fit would begin."""
     objects = trace.objects
-    original = merge._refitted
+    original = merge.merged_fits
 
     def stop(sampler_, state, like, *_, **__):
         raise _Chosen(next(k for k, o in enumerate(objects) if o is like))
 
-    merge._refitted = stop
+    merge.merged_fits = stop
     try:
         merge.propose_merge(sampler, trace, rng, i=i, state=trace)
     except _Chosen as chosen:
         return chosen.place
     finally:
-        merge._refitted = original
+        merge.merged_fits = original
     raise RuntimeError("propose_merge made no choice of partner")
 
 
@@ -367,7 +367,7 @@ def refit_choice_rows(sampler: Sampler, trace: Trace, rng: np.random.Generator,
 def fitted_class_rows(sampler: Sampler, state: Trace, rng: np.random.Generator,
                       draws: int) -> list[Row]:
     """The classes a fitted birth into ``state`` chooses at its first seed
-    (``fitted_birth.draw_class``), against ``fitted_birth.class_log_prob`` (what its ratio,
+    (``fit.draw_class``), against ``fit.class_log_prob`` (what its ratio,
     and its death's, use): chi-square over the classes (bins pooled to expected counts of at
     least 5), and E[r/q] = 1 with r uniform. No rows where ``state`` has no seed."""
     from .statistics import chisquare_gof
@@ -377,8 +377,8 @@ def fitted_class_rows(sampler: Sampler, state: Trace, rng: np.random.Generator,
         return []
     _, log_p = fitted_birth.class_choice(sampler, state, seeds[0])
     k = len(log_p)
-    log_q = np.array([fitted_birth.class_log_prob(log_p, c) for c in range(k)])
-    chosen = np.array([fitted_birth.draw_class(rng, log_p) for _ in range(draws)])
+    log_q = np.array([fitting.class_log_prob(log_p, c) for c in range(k)])
+    chosen = np.array([fitting.draw_class(rng, log_p) for _ in range(draws)])
     observed = np.bincount(chosen, minlength=k).astype(float)
     label = f"fitted birth's class of {k}"
     chi2, p = chisquare_gof(observed, np.exp(log_q) / np.exp(log_q).sum())
