@@ -51,6 +51,43 @@ def test_prior_recovery_sees_a_refit_taken_for_symmetric(monkeypatch):
     assert not report.passed, report.table()
 
 
+def test_the_refitted_class_is_weighed_in_both_ratios(monkeypatch):
+    """The refitted object's class is drawn by ``fit.draw_class`` from ``refitted_classes``'s
+    probabilities (their draws are checked against ``fit.class_log_prob`` by sppl verify,
+    tests/test_fitted_birth.py); here, that a refit's ratio divides by exactly the drawn
+    class's probability, and its reverse multiplies by that of the class it gives back,
+    worked out from the new object."""
+    from sppl.infer.chain import Sampler
+    from sppl.model.trace import make_object
+    from sppl.scoring.scorer import PriorScorer
+
+    model = with_refit(toy_model([ball_class(rate=0.8), block_class(rate=0.5)]))
+    block = model.classes[1]
+    objects = (make_object(model, block, {"x": 0.9, "y": 0.2, "a": 0.1, "s": 0.4, "c": "blue"}),)
+    sampler = Sampler(model, PriorScorer(), np.random.default_rng(0))
+    trace = sampler.make_trace(objects, {})
+    empty = sampler.make_trace((), {})
+
+    def proposal():
+        p = fit.propose_refit(sampler, trace, np.random.default_rng(4), k=0, state=empty)
+        after = sampler.make_trace(p.objects, {})
+        return p, p.tries.reverse(sampler, trace, p, after)
+
+    right, right_back = proposal()
+    right_deferred = right.deferred()
+    _, log_p = fit.refitted_classes(sampler, empty, objects[0])
+    _, log_p_back = fit.refitted_classes(sampler, empty, right.changed[0])
+    assert not np.allclose(log_p, log_p[0])  # the fits tell the classes apart
+    monkeypatch.setattr(fit, "class_log_prob", lambda log_p, c: 0.0)
+    left, _ = proposal()
+    c = model.classes.index(right.changed[0].cls)
+    assert left.changed[0].values == right.changed[0].values
+    assert math.isclose(right.log_q_ratio - left.log_q_ratio, -log_p[c], abs_tol=1e-9)
+    assert math.isclose(right_deferred - left.deferred(), log_p_back[model.classes.index(block)],
+                        abs_tol=1e-9)
+    assert right_back.changed[0] is objects[0]
+
+
 def test_every_refit_and_its_reverse(require_gl):
     """Against observations: the reverse, through the same scene without the object, gives
     back the trace with minus the log ratio."""

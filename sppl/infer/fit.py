@@ -4,9 +4,10 @@ A sphere that the chain grew where a cube stands cannot become that cube by any 
 draws the cube's size and angle from the prior: the chance that a draw lands close enough to
 be accepted is around one in a million. The refit jump instead *fits* the new object to the
 observations first. It picks object k (where the observations disagree with the state:
-``sppl.infer.misfit``) and a class c (uniform), removes k, and runs
-a short deterministic search for the parameters of a c-object that maximise the posterior of
-the scene without k plus that object, starting from k's own values (by name) and its place.
+``sppl.infer.misfit``), removes k, and runs for every class c a short deterministic search
+for the parameters of a c-object that maximise the posterior of the scene without k plus that
+object, starting from k's own values (by name) and its place; it chooses the class by those
+fits (``class_log_probs``: P(c | x-, k) = 0.95 softmax of their log joints + 0.05 / K).
 The proposal is then a mixture of the fit and a birth into x- (``sppl.infer.birth``, the replace
 jump's proposal), B the model's ``fit_births`` setting, so that a refit can also leave a state
 the fit does not explain:
@@ -24,7 +25,8 @@ k-class object from the new object's values in the same x-, and must propose k e
 
     alpha_refit = pi(x- + y) q(old | x-, y) / (pi(x- + old) q(y | x-, old)).
 
-The class choices are uniform both ways and cancel; the object's is q(k | y) / q(k | x) of
+The class choices are P(c | x-, old) forward and P(c_old | x-, y) back (the reverse fits
+every class from y, deferred with its fit); the object's is q(k | y) / q(k | x) of
 ``sppl.infer.misfit`` (the proposal's ``ratio_fn``). Proposals outside a
 parameter's domain have zero prior and are rejected, so the Gaussians need no truncation.
 """
@@ -64,8 +66,8 @@ START_DRAWS = 16
 # steps does not leave: before it, each periodic parameter is tried at this many turns evenly
 # spread over its period.
 TURNS = 8
-# A fitted birth's class, and a merged object's, is the class whose fit explains the pixels
-# best, but for this share of the moves, whose class is uniform. With the class uniform, the
+# A fitted birth's class, a merged object's and a refitted one's, is the class whose fit
+# explains the pixels best, but for this share of the moves, whose class is uniform. With the class uniform, the
 # first object a chain fitted to a large cone was as often a cube, a cylinder or a sphere, each
 # accepted (anything explains a blob better than nothing), and the cone's pixels the cube left
 # were then explained by pieces that no later single move could take back (shapes_plus.scn's
@@ -401,6 +403,26 @@ def log_mixture_bound(sampler, state: Trace, cls: ObjectClass, values) -> float:
                               math.log(b) + sampler.birth.log_density(cls, values, state)))
 
 
+def refitted_classes(sampler, state: Trace, like: SceneObject) -> tuple[list[dict], np.ndarray]:
+    """A refit's fits of every class into ``state`` from ``like``, and log P(c | x-, like) of
+    choosing each (``class_log_probs`` of their log joints)."""
+    fits, scores = zip(*(scored_fit(sampler, state, cls, like) for cls in sampler.model.classes))
+    return list(fits), class_log_probs(scores)
+
+
+def refit_back(sampler, state: Trace, old: SceneObject, new: SceneObject):
+    """The reverse density of a refit of ``old`` into ``new`` in ``state``: the class choice
+    from ``new`` and log q_mixture(old | its class's fit), deferred (the function, every
+    class's fit; and an upper bound, no fit)."""
+    def back() -> float:
+        fits, log_p = refitted_classes(sampler, state, new)
+        c = sampler.model.classes.index(old.cls)
+        return class_log_prob(log_p, c) + log_mixture(sampler, state, old.cls, old.values,
+                                                       fits[c])
+
+    return back, log_mixture_bound(sampler, state, old.cls, old.values)
+
+
 def refitted_back(sampler, state: Trace, old: SceneObject, new: SceneObject, also=(),
                   seeds: int = 0, polish: int = 0):
     """The reverse density of a move that replaced ``old`` by the fitted ``new`` in
@@ -439,7 +461,8 @@ def sample(sampler, state: Trace, cls: ObjectClass, fitted, rng: np.random.Gener
 def propose_refit(sampler, trace: Trace, rng: np.random.Generator, k: int | None = None,
                   cls: ObjectClass | None = None, target: SceneObject | None = None,
                   state: Trace | None = None) -> Proposal | None:
-    """A refit of object k (``misfit.choose``) as a ``cls`` (uniform) object; given ``target``, the
+    """A refit of object k (``misfit.choose``) as a ``cls`` object (chosen by the fits of every
+    class, ``refitted_classes``); given ``target``, the
     proposal of exactly that object (the reverse of a refit, through the same ``state``)."""
     n = len(trace.objects)
     if n == 0:
@@ -447,13 +470,14 @@ def propose_refit(sampler, trace: Trace, rng: np.random.Generator, k: int | None
     model = sampler.model
     k = misfit.choose(sampler, trace, rng) if k is None else k
     here = misfit.choice_log_probs(sampler, trace)
-    cls = model.classes[int(rng.integers(len(model.classes)))] if cls is None else cls
     old = trace.objects[k]
     rest = trace.objects[:k] + trace.objects[k + 1 :]
     # The scene without k, rendered in full so that its scores, and so the fits, are the
     # same whichever state it is reached from.
     state = state if state is not None else sampler.make_trace(rest, trace.noise)
-    forward = fit(sampler, state, cls, old)
+    fits, log_p = refitted_classes(sampler, state, old)
+    c = draw_class(rng, log_p) if cls is None else model.classes.index(cls)
+    cls, forward = model.classes[c], fits[c]
     values = dict(target.values) if target is not None else sample(sampler, state, cls, forward,
                                                                     rng)
     obj = target if target is not None else make_object(model, cls, values)
@@ -461,9 +485,9 @@ def propose_refit(sampler, trace: Trace, rng: np.random.Generator, k: int | None
     if not math.isfinite(obj.log_prior):
         return Proposal("refit", old.cls.name, objects, trace.noise, (obj,), -math.inf,
                         tries=Refit(state, k))
-    log_q_forward = log_mixture(sampler, state, cls, values, forward)
-    # The reverse fit is computed only when the proposal has a chance (Sampler.decide).
-    back, bound = refitted_back(sampler, state, old, obj)
+    log_q_forward = class_log_prob(log_p, c) + log_mixture(sampler, state, cls, values, forward)
+    # The reverse fits are computed only when the proposal has a chance (Sampler.decide).
+    back, bound = refit_back(sampler, state, old, obj)
 
     def choices(new: Trace) -> float:
         # A focused choice of k has its probability in either state (sppl.infer.misfit).

@@ -329,18 +329,18 @@ def refit_object(sampler: Sampler, trace: Trace, rng: np.random.Generator) -> in
     """The object ``fit.propose_refit`` chooses in ``trace``: the move's own code run up to
     the choice, and stopped where its fit would begin."""
     objects = trace.objects
-    original = fitting.fit
+    original = fitting.refitted_classes
 
-    def stop(sampler_, state, cls, like, keep=None, also=()):
+    def stop(sampler_, state, like):
         raise _Chosen(next(k for k, o in enumerate(objects) if o is like))
 
-    fitting.fit = stop
+    fitting.refitted_classes = stop
     try:
         fitting.propose_refit(sampler, trace, rng, state=trace)
     except _Chosen as chosen:
         return chosen.place
     finally:
-        fitting.fit = original
+        fitting.refitted_classes = original
     raise RuntimeError("propose_refit made no choice of object")
 
 
