@@ -67,13 +67,13 @@ START_DRAWS = 16
 # spread over its period.
 TURNS = 8
 # A fitted birth's class, a merged object's and a refitted one's, is the class whose fit
-# explains the pixels best, but for this share of the moves, whose class is uniform. With the class uniform, the
-# first object a chain fitted to a large cone was as often a cube, a cylinder or a sphere, each
-# accepted (anything explains a blob better than nothing), and the cone's pixels the cube left
-# were then explained by pieces that no later single move could take back (shapes_plus.scn's
-# prior scene 16: a cone fitted at the first seed scores 42,181 against the empty scene, a cube
-# 19,110, a cylinder 23,382). The share keeps every class proposable where the fits rank them
-# wrong.
+# explains the pixels best, but for this share of the moves, whose class is uniform. With the
+# class uniform, the first object a chain fitted to a large cone was as often a cube, a
+# cylinder or a sphere, each accepted (anything explains a blob better than nothing), and the
+# cone's pixels the cube left were then explained by pieces that no later single move could
+# take back (shapes_plus.scn's prior scene 16: a cone fitted at the first seed scores 42,181
+# against the empty scene, a cube 19,110, a cylinder 23,382). The share keeps every class
+# proposable where the fits rank them wrong.
 UNIFORM = 0.05
 _LOG_2PI = math.log(2.0 * math.pi)
 

@@ -5,13 +5,14 @@ class, size and colour from the prior, so a small purple sphere where the scene 
 born only when all of them happen to be right: a handful of times in thousands of sweeps.
 A fitted birth fits the whole object first. From the state x it takes the seeds, ground
 points where blobs of pixels are unexplained (``BirthProposal.seeds``, a deterministic
-function of x's renders), picks a seed s and a class c (uniform, among the classes with a
-declared ground position), fits a c-object starting at s (the refit's deterministic search,
-``sppl.infer.fit``) and draws the new object y around the fit:
+function of x's renders), picks a seed s, fits an object of each of the K classes with a
+declared ground position starting at s (the refit's deterministic search, ``sppl.infer.fit``),
+chooses a class c by those fits and draws the new object y around its fit:
 
-    fitted birth (x -> x + y): s uniform among the S seeds of x, c uniform among the K
-        placed classes, y ~ q_fit(y | fit(x, c, s)) (the refit's spreads and categorical
-        draw), inserted at a uniform place;
+    fitted birth (x -> x + y): s uniform among the S seeds of x, c with probability
+        P(c | x, s) (``class_choice``: 0.95 times the softmax of the fits' log joints, plus
+        0.05 / K), y ~ q_fit(y | fit(x, c, s)) (the refit's spreads and categorical draw),
+        inserted at a uniform place;
     fitted death (x + y -> x): y uniform among the n objects of x + y, and the seed s that
         would have been its start chosen with probability rho(s | x, y): near y's position,
         (1 - FLOOR) exp(-d_s^2 / (2 RADIUS^2)) / sum + FLOOR / S, with d_s the distance from
@@ -19,14 +20,15 @@ declared ground position), fits a c-object starting at s (the refit's determinis
 
 The death's choice of s is an auxiliary draw: each (birth through s, death choosing s) pair is
 a pair of mutual reverses, and detailed balance for each pair gives it for the sum over s.
-So neither direction sums over the seeds, and each costs one fit:
+So neither direction sums over the seeds, and each costs K fits:
 
     log alpha_birth = log pi(x + y) - log pi(x)
                       + log P(fitted death) - log n + log rho(s | x, y)
-                      - log P(fitted birth) + log K + log S - log q_fit(y | fit(x, c, s)).
+                      - log P(fitted birth) - log P(c | x, s) + log S
+                      - log q_fit(y | fit(x, c, s)).
 
 Both directions fit in x rendered in full (not incrementally), so that the fit, and the
-seeds, are the same whichever way x is reached. The death's fit is deferred: computed only
+seeds, are the same whichever way x is reached. The death's fits are deferred: computed only
 where the ratio's upper bound cannot decide (``Sampler.decide``). A state without seeds
 has no fitted birth, and the death of an object into such a state, or of an object of a class
 without a position, is never proposed (its reverse is impossible). docs/inference.md has the
