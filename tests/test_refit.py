@@ -237,20 +237,27 @@ def test_a_reverse_fit_left_undone_changes_no_decision(require_gl, root, monkeyp
             log_alpha = self.log_alpha(trace, proposal, new)
             return None if math.isnan(log_alpha) else accept(log_alpha, self.rng)
 
-    real = fit.refitted_back
+    from sppl.infer import merge
+
+    # Where each move makes its deferred reverse density: a refit's, a merge's, a split's.
+    makers = ((fit, "refit_back"), (fit, "refitted_back"), (merge, "merged_back"))
+    real = {name: getattr(module, name) for module, name in makers}
     asked = {"made": 0, "computed": 0}
 
-    def counted(*args, **kwargs):
-        back, bound = real(*args, **kwargs)
-        asked["made"] += 1
+    def counted(name):
+        def make(*args, **kwargs):
+            back, bound = real[name](*args, **kwargs)
+            asked["made"] += 1
 
-        def computed():
-            asked["computed"] += 1
-            return back()
+            def computed():
+                asked["computed"] += 1
+                return back()
 
-        return computed, bound
+            return computed, bound
+        return make
 
-    monkeypatch.setattr(fit, "refitted_back", counted)
+    for module, name in makers:
+        monkeypatch.setattr(module, name, counted(name))
     lazy, sampler = _shapes_chain(root, Sampler)
     made, computed = asked["made"], asked["computed"]
     eager, _ = _shapes_chain(root, Eager)
@@ -260,11 +267,14 @@ def test_a_reverse_fit_left_undone_changes_no_decision(require_gl, root, monkeyp
                    if k[0] in ("refit", "merge", "split"))
     assert accepted > 0
 
-    def too_low(*args, **kwargs):
-        back, bound = real(*args, **kwargs)
-        return back, bound - 1000.0
+    def too_low(name):
+        def make(*args, **kwargs):
+            back, bound = real[name](*args, **kwargs)
+            return back, bound - 1000.0
+        return make
 
-    monkeypatch.setattr(fit, "refitted_back", too_low)
+    for module, name in makers:
+        monkeypatch.setattr(module, name, too_low(name))
     wrong, _ = _shapes_chain(root, Sampler)
     assert wrong != eager
 
