@@ -276,6 +276,13 @@ def class_log_probs(scores) -> np.ndarray:
     return np.logaddexp(math.log1p(-UNIFORM) + by_fit, math.log(UNIFORM / k))
 
 
+def class_index(classes, cls: ObjectClass) -> int:
+    """The place of ``cls`` among ``classes``, by name: a region binds a model's classes anew
+    (``sppl.model.region``), so an object made from the model before its sampler bound it has
+    a class equal to none of the sampler's."""
+    return next(k for k, c in enumerate(classes) if c.name == cls.name)
+
+
 def draw_class(rng: np.random.Generator, log_p: np.ndarray) -> int:
     """A class drawn from ``class_log_probs``'s probabilities."""
     return int(rng.choice(len(log_p), p=np.exp(log_p - np.logaddexp.reduce(log_p))))
@@ -416,9 +423,9 @@ def refit_back(sampler, state: Trace, old: SceneObject, new: SceneObject):
     class's fit; and an upper bound, no fit)."""
     def back() -> float:
         fits, log_p = refitted_classes(sampler, state, new)
-        c = sampler.model.classes.index(old.cls)
-        return class_log_prob(log_p, c) + log_mixture(sampler, state, old.cls, old.values,
-                                                       fits[c])
+        c = class_index(sampler.model.classes, old.cls)
+        return class_log_prob(log_p, c) + log_mixture(
+            sampler, state, sampler.model.classes[c], old.values, fits[c])
 
     return back, log_mixture_bound(sampler, state, old.cls, old.values)
 
@@ -476,7 +483,7 @@ def propose_refit(sampler, trace: Trace, rng: np.random.Generator, k: int | None
     # same whichever state it is reached from.
     state = state if state is not None else sampler.make_trace(rest, trace.noise)
     fits, log_p = refitted_classes(sampler, state, old)
-    c = draw_class(rng, log_p) if cls is None else model.classes.index(cls)
+    c = draw_class(rng, log_p) if cls is None else class_index(model.classes, cls)
     cls, forward = model.classes[c], fits[c]
     values = dict(target.values) if target is not None else sample(sampler, state, cls, forward,
                                                                     rng)

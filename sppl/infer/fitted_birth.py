@@ -123,7 +123,8 @@ def propose_fitted_birth(sampler, trace: Trace, rng: np.random.Generator,
         return None
     s = int(rng.integers(len(seeds))) if seed is None else seed
     fits, log_p = class_choice(sampler, state, seeds[s])
-    c = fitting.draw_class(rng, log_p) if target is None else classes.index(target.cls)
+    c = fitting.draw_class(rng, log_p) if target is None else \
+        fitting.class_index(classes, target.cls)
     cls, fitted = classes[c], fits[c]
     obj = target if target is not None else make_object(model, cls,
                                                         fitting.draw(cls, fitted, rng))
@@ -169,8 +170,9 @@ def propose_fitted_death(sampler, trace: Trace, rng: np.random.Generator, k: int
 
     def back() -> float:
         fits, log_p = class_choice(sampler, state, seeds[s])
-        c = classes.index(gone.cls)
-        return fitting.class_log_prob(log_p, c) + fitting.log_density(gone.cls, gone.values, fits[c])
+        c = fitting.class_index(classes, gone.cls)
+        return fitting.class_log_prob(log_p, c) + fitting.log_density(classes[c], gone.values,
+                                                                      fits[c])
 
     return Proposal(
         "fitted_death", gone.cls.name, rest, trace.noise, (), log_q_back - log_q_forward,

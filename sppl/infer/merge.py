@@ -212,9 +212,9 @@ def merged_back(sampler, state: Trace, old: SceneObject, like: SceneObject, also
     choice's log probability is at most 0)."""
     def back() -> float:
         fits, log_p = merged_fits(sampler, state, like, also)
-        c = sampler.model.classes.index(old.cls)
+        c = fitting.class_index(sampler.model.classes, old.cls)
         return fitting.class_log_prob(log_p, c) + fitting.log_mixture(
-            sampler, state, old.cls, old.values, fits[c])
+            sampler, state, sampler.model.classes[c], old.values, fits[c])
 
     return back, fitting.log_mixture_bound(sampler, state, old.cls, old.values)
 
@@ -288,7 +288,8 @@ def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None
     rest = _without(objects, j, *taken)
     state = state if state is not None else sampler.make_trace(rest, trace.noise)
     fits, log_p = merged_fits(sampler, state, old, gone)
-    c = fitting.draw_class(rng, log_p) if target is None else model.classes.index(target.cls)
+    c = fitting.draw_class(rng, log_p) if target is None else \
+        fitting.class_index(model.classes, target.cls)
     cls, forward = model.classes[c], fits[c]
     new = target if target is not None else make_object(
         model, cls, fitting.sample(sampler, state, cls, forward, rng))
