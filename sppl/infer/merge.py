@@ -181,14 +181,14 @@ def merge_search(sampler) -> dict[str, int]:
 
 
 def _refitted(sampler, state: Trace, like: SceneObject, rng: np.random.Generator,
-              target: SceneObject | None, also=(), search=None) -> tuple[SceneObject, dict]:
-    """A draw from the refit proposal of a uniform class into ``state``, starting from
-    ``like`` or the objects ``also`` (or exactly ``target``), and the fit it is drawn
+              target: SceneObject | None) -> tuple[SceneObject, dict]:
+    """A split's fitted object: a draw from the refit proposal of a uniform class into
+    ``state``, starting from ``like`` (or exactly ``target``), and the fit it is drawn
     around."""
     model = sampler.model
     cls = target.cls if target is not None else model.classes[
         int(rng.integers(len(model.classes)))]
-    forward = fitting.fit(sampler, state, cls, like, also=also, **(search or {}))
+    forward = fitting.fit(sampler, state, cls, like)
     if target is None:
         target = make_object(model, cls, fitting.sample(sampler, state, cls, forward, rng))
     return target, forward

@@ -344,49 +344,44 @@ def refit_object(sampler: Sampler, trace: Trace, rng: np.random.Generator) -> in
     raise RuntimeError("propose_refit made no choice of object")
 
 
+def choice_rows(label: str, options: str, chosen, log_q: np.ndarray) -> list[Row]:
+    """A discrete choice's draws ``chosen`` against the log probabilities ``log_q`` its ratio
+    uses: chi-square over the options (bins pooled to expected counts of at least 5), and
+    E[r/q] = 1 with r uniform."""
+    from .statistics import chisquare_gof
+
+    n = len(log_q)
+    chosen = np.asarray(chosen)
+    observed = np.bincount(chosen, minlength=n).astype(float)
+    chi2, p = chisquare_gof(observed, np.exp(log_q) / np.exp(log_q).sum())
+    return [Row("proposals", f"{label}: {options}",
+                "chosen with the ratio's probabilities (chi-square)",
+                f"chi2={chi2:.1f}, n={len(chosen)}", p),
+            identity_row("proposals", label, list(chosen), lambda k: float(log_q[k]),
+                         lambda k: -math.log(n))]
+
+
 def refit_choice_rows(sampler: Sampler, trace: Trace, rng: np.random.Generator,
                       draws: int) -> list[Row]:
     """The objects ``fit.propose_refit`` chooses in ``trace``, against
-    ``misfit.choice_log_probs`` (what its ratio uses, in both states): chi-square over the
-    objects (bins pooled to expected counts of at least 5), and E[r/q] = 1 with r uniform."""
-    from .statistics import chisquare_gof
-
+    ``misfit.choice_log_probs`` (what its ratio uses, in both states): ``choice_rows``."""
     log_q = misfit.choice_log_probs(sampler, trace)
-    n = len(trace.objects)
-    chosen = np.array([refit_object(sampler, trace, rng) for _ in range(draws)])
-    observed = np.bincount(chosen, minlength=n).astype(float)
-    label = f"refit object of {n}"
-    chi2, p = chisquare_gof(observed, np.exp(log_q) / np.exp(log_q).sum())
-    return [Row("proposals", f"{label}: objects",
-                "chosen with the ratio's probabilities (chi-square)",
-                f"chi2={chi2:.1f}, n={draws}", p),
-            identity_row("proposals", label, list(chosen), lambda k: float(log_q[k]),
-                         lambda k: -math.log(n))]
+    chosen = [refit_object(sampler, trace, rng) for _ in range(draws)]
+    return choice_rows(f"refit object of {len(trace.objects)}", "objects", chosen, log_q)
 
 
 def fitted_class_rows(sampler: Sampler, state: Trace, rng: np.random.Generator,
                       draws: int) -> list[Row]:
     """The classes a fitted birth into ``state`` chooses at its first seed
-    (``fit.draw_class``), against ``fit.class_log_prob`` (what its ratio,
-    and its death's, use): chi-square over the classes (bins pooled to expected counts of at
-    least 5), and E[r/q] = 1 with r uniform. No rows where ``state`` has no seed."""
-    from .statistics import chisquare_gof
-
+    (``fit.draw_class``), against ``fit.class_log_prob`` (what its ratio, and its death's,
+    use): ``choice_rows``. No rows where ``state`` has no seed."""
     seeds = sampler.birth.seeds(state)
     if not len(seeds):
         return []
     _, log_p = fitted_birth.class_choice(sampler, state, seeds[0])
-    k = len(log_p)
-    log_q = np.array([fitting.class_log_prob(log_p, c) for c in range(k)])
-    chosen = np.array([fitting.draw_class(rng, log_p) for _ in range(draws)])
-    observed = np.bincount(chosen, minlength=k).astype(float)
-    label = f"fitted birth's class of {k}"
-    chi2, p = chisquare_gof(observed, np.exp(log_q) / np.exp(log_q).sum())
-    return [Row("proposals", f"{label}: classes",
-                "chosen with the ratio's probabilities (chi-square)",
-                f"chi2={chi2:.1f}, n={draws}", p),
-            identity_row("proposals", label, list(chosen), lambda c: float(log_q[c]),
-                         lambda c: -math.log(k))]
+    log_q = np.array([fitting.class_log_prob(log_p, c) for c in range(len(log_p))])
+    chosen = [fitting.draw_class(rng, log_p) for _ in range(draws)]
+    return choice_rows(f"fitted birth's class of {len(log_p)}", "classes", chosen, log_q)
 
 
 def _from_uniform(counts: np.ndarray) -> float | None:
