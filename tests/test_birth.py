@@ -185,6 +185,71 @@ def test_the_depth_gap_follows_the_depth_maps_noise():
     assert depth_noise(depth, None, 8.0) == pytest.approx(0.0, abs=1e-9)
 
 
+def test_a_depth_speck_in_front_of_everything_is_kept_and_outliers_and_mixed_pixels_are_not():
+    """On a floor 4 m away with a box 3 m away drawn: four pixels 2.5 m away, apart or on the
+    box, are a speck; three touching outliers at unrelated depths are not, nor pixels
+    mixed across the box's edge (between its depth and the floor's), nor a few centimetres
+    of noise; and a blob keeps only what the erosion leaves of it, no speck of its own."""
+    from sppl.infer import birth
+
+    rendered = np.full((24, 24), 4.0, dtype=np.float32)
+    rendered[8:14, 8:14] = 3.0
+    gap, strong = 0.1, 0.25
+
+    def specks(observed):
+        off = observed < rendered - gap
+        return birth._depth_specks(off, birth._blobs(off), observed, rendered, strong)
+
+    apart = rendered.copy()
+    apart[19:21, 3:5] = 2.5
+    assert np.argwhere(specks(apart)).tolist() == [[19, 3], [19, 4], [20, 3], [20, 4]]
+    on_the_box = rendered.copy()
+    on_the_box[10:12, 10:12] = 2.5
+    assert specks(on_the_box).sum() == 4
+    outliers = rendered.copy()
+    outliers[20, 3:6] = (0.7, 2.1, 3.3)
+    assert not specks(outliers).any()
+    mixed = rendered.copy()
+    mixed[8:14, 14] = 3.4
+    mixed[8:14, 15] = 3.6
+    assert not specks(mixed).any()
+    faint = rendered.copy()
+    faint[19:21, 3:5] = 3.85
+    assert not specks(faint).any()
+    blob = rendered.copy()
+    blob[16:22, 16:22] = 2.5
+    assert not specks(blob).any()
+
+
+def test_a_ball_only_the_depth_camera_sees_is_seeded_by_its_speck(require_gl, root, monkeypatch):
+    """A 10 cm ball 4.6 m from a 96x96 depth camera, with the example's depth noise (5 cm,
+    and 1 pixel in 100 an outlier): a few pixels, which the erosion leaves too few of to
+    seed. Its speck seeds a fitted birth at the ball; without depth specks nothing does, and
+    the true scene has no seed."""
+    from sppl.infer import birth
+
+    model = load_model(root / "models" / "shapes_plus.scn")
+    renderer = Renderer(model.render)
+    scene = {"objects": [{"class": "sphere", "params": {"x": 0.2, "y": 0.3, "r": 0.05,
+                                                        "c": "green"}},
+                         {"class": "cube", "params": {"x": -0.8, "y": -0.5, "a": 0.3, "s": 0.5,
+                                                      "c": "red"}}],
+             "noise": {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}}}
+    f = focal_from_fov(96, 50)
+    camera = Camera("depth", 96, 96, f, f, 48, 48, look_at((3.0, -3.2, 1.6), (0, 0, 0.3)), 8.0)
+    truth = objects_from_dict(model, scene)
+    frames = render_observations(model, truth, scene["noise"], [CameraSpec(camera, ("depth",))],
+                                 renderer, np.random.default_rng(0))
+    sampler = Sampler(model, Scorer(model, Observations(root, frames), renderer),
+                      np.random.default_rng(1))
+    without_ball = sampler.make_trace(truth[1:], scene["noise"])
+    seeds = sampler.birth.seeds(without_ball)
+    assert len(seeds) >= 1 and np.linalg.norm(seeds - (0.2, 0.3), axis=1).min() < 0.1, seeds
+    assert len(sampler.birth.seeds(sampler.make_trace(truth, scene["noise"]))) == 0
+    monkeypatch.setattr(birth, "DEPTH_SPECK_PIXELS", 10**9)
+    assert len(sampler.birth.seeds(sampler.make_trace(truth[1:], scene["noise"]))) == 0
+
+
 def test_a_speck_apart_from_the_drawn_edges_is_kept_and_one_along_them_is_not():
     """On a grey floor with a red square drawn: a single pixel far off the render, apart
     from everything, is a speck; the same pixel beside the square's edge (its rim drawn a
