@@ -86,45 +86,6 @@ def test_an_object_a_pixel_across_seeds_a_birth(root, require_gl, tmp_path, monk
     assert len(seeds(objects[:1])) == 0
 
 
-def test_a_pole_beside_a_cube_is_fitted_from_shrunk_starts(root, require_gl, tmp_path,
-                                                           monkeypatch):
-    """A pole 4 cm thick standing 8 cm from a cube's face (shapes_plus.scn's prior scene 10):
-    every draw of the cylinder's prior placed at the pole overlaps the cube, so every start
-    of the fit has zero prior and the search cannot move. With the starts' sizes shrunk the
-    fit finds the pole, and its class is the likeliest; without them the fit is -inf."""
-    import json
-
-    from sppl.data.observations import load_observations
-    from sppl.lang import load_model
-    from sppl.model.simulate import load_scene
-    from sppl.render import Renderer
-    from sppl.runs.experiment import simulate
-    from sppl.scoring.scorer import Scorer
-
-    scene = {"objects": [
-        {"class": "cube", "params": {"x": 0.0, "y": 0.0, "a": 0.0, "s": 0.6, "c": "blue"}},
-        {"class": "cylinder", "params": {"x": 0.4, "y": 0.0, "r": 0.02, "h": 1.3, "c": "red"}}],
-        "noise": {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}}}
-    (tmp_path / "scene.json").write_text(json.dumps(scene))
-    path = root / "models" / "shapes_plus.scn"
-    obs_path = simulate(path, root / "examples" / "models" / "shapes_plus" / "cameras.json",
-                        tmp_path / "scene.json", tmp_path / "obs", seed=2026)
-    model = load_model(path)
-    objects, noise = load_scene(model, obs_path / "scene.json")
-    sampler = Sampler(model, Scorer(model, load_observations(obs_path), Renderer(model.render)),
-                      np.random.default_rng(0))
-    state = sampler.make_trace(objects[:1], noise)
-    classes = fitted_birth.placed_classes(sampler.model)
-    cylinder = classes[fitting.class_index(classes, objects[1].cls)]
-    fitted, score = fitted_birth.fit_at(sampler, state, cylinder, (0.4, 0.0))
-    assert score > state.score + 100
-    assert np.hypot(fitted["x"] - 0.4, fitted["y"]) < 0.05 and fitted["r"] < 0.05, fitted
-    fits, log_p = fitted_birth.class_choice(sampler, state, (0.4, 0.0))
-    assert int(np.argmax(log_p)) == classes.index(cylinder)
-    monkeypatch.setattr(fitting, "SHRINK", ())
-    assert fitted_birth.fit_at(sampler, state, cylinder, (0.4, 0.0))[1] == -math.inf
-
-
 def test_a_fitted_birth_finds_the_missing_object(setting):  # noqa: F811
     """With the blue sphere missing, fitted births propose it: of 12, several have the right
     class and colour within 0.1 m, and such a proposal is accepted."""

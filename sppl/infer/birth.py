@@ -47,22 +47,6 @@ COLOUR_GAP = 0.1
 # in ten million pixels).
 STRONG_COLOUR_GAP = 0.2
 STRONG_SIGMAS = 4.0
-# The depth map's specks: a ball 10 cm wide or a pole 4 cm thick, seen by the depth camera
-# alone (the RGB camera's view of it blocked), is 4 to 45 pixels a few metres nearer than the
-# floor or the sky behind it, which the erosion leaves with fewer than SEED_PIXELS (shapes_plus
-# prior scenes 3, 4, 9 and 10). Such a piece of unexplained depth pixels seeds when it holds
-# DEPTH_SPECK_PIXELS strongly-off pixels within SPECK_DEPTH_SPREAD metres of their median
-# depth: pixels this many times the map's noise, and at least the depth gap, nearer than the
-# render at every pixel within two of them. A single Gaussian deviate passes 5 sigma about
-# three times in ten million pixels; a pixel mixed across an edge the render draws lies
-# between the depths on either side of it, where a missing object is in front of them all;
-# and a depth sensor's outliers (1 pixel in 100 of the example's maps, anywhere in its range)
-# are single pixels at unrelated depths: without the spread, three outliers touching each
-# other seeded in 3 of the 60 true scenes of shapes' and shapes_plus' prior benchmark; with
-# it, none of them, nor of blocks', seeds.
-STRONG_DEPTH_SIGMAS = 5.0
-DEPTH_SPECK_PIXELS = 3
-SPECK_DEPTH_SPREAD = 0.5
 # At most this many points describe a state (an even stride over the unexplained pixels), so
 # that the density costs microseconds.
 MAX_POINTS = 400
@@ -89,10 +73,6 @@ class BirthProposal:
                                                                       t.camera.depth_max))
                            for t in self.terms if t.kind == "depth"}
         self._static_depth = None
-        self.strong_depth_gaps = {
-            t.frame: max(self.depth_gaps[t.frame],
-                         STRONG_DEPTH_SIGMAS * depth_noise(t.observed, t.valid, t.camera.depth_max))
-            for t in self.terms if t.kind == "depth"}
         self.strong_gaps = {t.frame: max(STRONG_COLOUR_GAP,
                                          STRONG_SIGMAS * image_noise(t.observed))
                             for t in self.terms if t.kind == "image"}
@@ -134,17 +114,14 @@ class BirthProposal:
             dirs, ray_to_z, centre = self.rays[t.frame]
             rendered = self.scorer.rendered(renders, t)
             if t.kind == "depth":
-                off = t.observed < rendered - self.depth_gaps[t.frame]
-                off &= _measured(t.observed, t.valid, t.camera.depth_max)
-                blobs = _blobs(off)
-                strong = _depth_specks(off, blobs, t.observed, rendered,
-                                       self.strong_depth_gaps[t.frame])
-                near = blobs | strong
+                near = t.observed < rendered - self.depth_gaps[t.frame]
+                near &= _measured(t.observed, t.valid, t.camera.depth_max)
+                near = _blobs(near)
                 dist = t.observed[near]
                 if t.camera.depth_type == "z":
                     dist = dist / ray_to_z[near]
                 pts = centre + dirs[near] * dist[:, None]
-                strong = strong[near]
+                strong = np.zeros(len(pts), dtype=bool)
             elif t.kind == "image":
                 off = np.abs(t.observed - rendered).mean(axis=-1)
                 blobs = _blobs(off > COLOUR_GAP)
@@ -273,23 +250,6 @@ def _cached(trace, key: str, compute) -> np.ndarray:
     if cached is None:
         cached = trace.cache[key] = compute(trace.renders)
     return cached
-
-
-def _depth_specks(flagged: np.ndarray, blobs: np.ndarray, observed: np.ndarray,
-                  rendered: np.ndarray, gap: float) -> np.ndarray:
-    """The pieces of ``flagged`` (4-connected) with fewer than SEED_PIXELS pixels of
-    ``blobs``, whole, that hold DEPTH_SPECK_PIXELS strongly-off pixels (``observed`` nearer
-    than ``rendered`` by ``gap`` at every pixel within two) whose depths lie within
-    SPECK_DEPTH_SPREAD of their median."""
-    labels, count = ndimage.label(flagged, structure=_CROSS)
-    strong = flagged & (observed < ndimage.minimum_filter(rendered, size=5) - gap)
-    few = np.bincount(labels[blobs], minlength=count + 1) < SEED_PIXELS
-    keep = np.zeros(count + 1, dtype=bool)
-    for piece in np.unique(labels[strong]):
-        depths = observed[strong & (labels == piece)]
-        close = np.abs(depths - np.median(depths)) <= SPECK_DEPTH_SPREAD
-        keep[piece] = few[piece] and close.sum() >= DEPTH_SPECK_PIXELS
-    return keep[labels]
 
 
 def _specks(flagged: np.ndarray, blobs: np.ndarray, strong: np.ndarray,

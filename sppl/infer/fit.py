@@ -66,8 +66,6 @@ START_DRAWS = 16
 # steps does not leave: before it, each periodic parameter is tried at this many turns evenly
 # spread over its period.
 TURNS = 8
-# Where every start of a fit has zero prior, it also starts from them with their sizes scaled so.
-SHRINK = (0.5, 0.25, 0.125, 0.0625)
 # A fitted birth's class, a merged object's and a refitted one's, is the class whose fit
 # explains the pixels best, but for this share of the moves, whose class is uniform. With the
 # class uniform, the first object a chain fitted to a large cone was as often a cube, a
@@ -108,16 +106,6 @@ def _starts(cls: ObjectClass, like: SceneObject, keep=None) -> list[dict[str, An
         values.update({n: like.values[n] for n in shared})
         starts.append(values)
     return starts
-
-
-def _shrunk(cls: ObjectClass, values, keep=None) -> list[dict[str, Any]]:
-    """``values`` with the continuous parameters that are neither kept nor angles (its sizes)
-    scaled by each of SHRINK: where every start overlaps a neighbour (a pole 8 cm from a cube
-    fitted from draws of the cylinder's prior, the thinnest of them 20 cm wide: shapes_plus.scn's
-    prior scene 10), a search from starts of zero prior has nowhere to go."""
-    sizes = [p.name for p in cls.parameters if p.continuous and not isinstance(p.domain, Periodic)
-             and (keep is None or p.name not in keep) and p.name not in (cls.position or ())]
-    return [{**values, **{n: values[n] * f for n in sizes}} for f in SHRINK]
 
 
 def _score(sampler, state: Trace, cls: ObjectClass, values) -> float:
@@ -259,9 +247,6 @@ def scored_fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=
     score = _Scores(sampler, state, cls)
     starts = [v for o in (like, *also) for v in _starts(cls, o, keep)]
     scores = [score(v) for v in starts]
-    if not np.isfinite(scores).any():
-        starts += [v for start in starts for v in _shrunk(cls, start, keep)]
-        scores = [score(v) for v in starts]
     best = max(scores)
     values = starts[scores.index(best)]
     found = _search(score, values, best)
