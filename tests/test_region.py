@@ -229,6 +229,40 @@ def test_a_chain_with_a_region_never_leaves_it(require_gl):
                                          "split", "parameters")), moved
 
 
+def test_a_given_scene_is_scored_and_moved_with_the_bound_region(require_gl):
+    """Objects made from the model before the sampler bound `region cameras` (a starting
+    scene, a truth to score) become objects of the sampler's classes: one the cameras do not
+    see has no prior density, one they see carries the region's normaliser, and a chain from
+    them draws its classes' changes and births inside the region."""
+    model = model_with("region cameras", jumps=LIGHT)
+    sim = verify.Simulator(model, verify.verify_cameras(model, 16), _renderer())
+    rng = np.random.default_rng(4)
+    ball, block = model.object_class("ball"), model.object_class("block")
+    seen = make_object(model, ball, {"x": 0.0, "y": 0.0, "r": 0.3, "c": "red"})
+    unseen = make_object(model, block, {"x": 40.0, "y": 0.0, "a": 0.0, "s": 0.4, "c": "red"})
+    noise = sample_noise(model, rng)
+    sampler = sim.sampler(sim.observe(sim.render([seen]), noise, rng), rng, Sampler)
+    bound = sampler.model.object_class("ball")
+    assert bound is not ball and bound.restriction is not None
+
+    trace = sampler.make_trace((seen,), noise)
+    assert trace.objects[0].cls is bound
+    mass = bound.restriction.log_mass
+    assert mass < -1e-3  # the cameras see a part of the ground the prior could put it on
+    assert trace.objects[0].log_prior == pytest.approx(seen.log_prior - mass)
+    assert trace.log_prior == pytest.approx(
+        sampler.make_trace((make_object(sampler.model, bound, seen.values),), noise).log_prior)
+    assert sampler.make_trace((seen, unseen), noise).log_prior == -math.inf
+    # The chain's own objects pass through as they are.
+    assert sampler.make_trace(trace.objects, noise).objects[0] is trace.objects[0]
+
+    trace = sampler.initial_trace((seen,))
+    for _ in range(60):
+        trace = sampler.sweep(trace)
+        assert all(o.cls is sampler.model.object_class(o.cls.name) for o in trace.objects)
+        assert all(o.cls.restriction.contains(o.values) for o in trace.objects)
+
+
 def _renderer():
     from sppl.render import Renderer
 

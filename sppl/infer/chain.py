@@ -20,7 +20,14 @@ import numpy as np
 
 from ..model.jumps import jump, jump_names
 from ..model.region import bind_region
-from ..model.trace import Trace, noise_log_prior, objects_log_prior, overlaps_any
+from ..model.trace import (
+    SceneObject,
+    Trace,
+    make_object,
+    noise_log_prior,
+    objects_log_prior,
+    overlaps_any,
+)
 from ..model.types import Model
 from ..scoring.protocol import ScorerProtocol
 from . import (
@@ -121,6 +128,7 @@ class Sampler:
     def __init__(self, model: Model, scorer: ScorerProtocol, rng: np.random.Generator) -> None:
         # A `region cameras` becomes the ground the scorer's cameras see (sppl.model.region).
         self.model = model = bind_region(model, getattr(scorer, "cameras", {}).values())
+        self._class_ids = {id(c) for c in model.classes}
         self.scorer = scorer
         self.rng = rng
         self.stats = MoveStats()
@@ -149,12 +157,26 @@ class Sampler:
         return self.make_trace(tuple(objects), noise)
 
     def make_trace(self, objects, noise) -> Trace:
+        objects = self.own_objects(objects)
         stats, renders = self.scorer.evaluate(objects, None, *_noise_args(self, noise))
         log_prior = objects_log_prior(self.model, objects) + noise_log_prior(self.model, noise)
         return Trace(
             self.model, tuple(objects), noise, stats, log_prior,
             self.scorer.log_likelihood(stats, noise), renders,
         )
+
+    def own_objects(self, objects) -> tuple[SceneObject, ...]:
+        """``objects`` as objects of this sampler's classes. A scene made from the model before
+        the sampler bound its region (a given starting scene, a truth to score) holds the
+        unbound classes, whose prior ignores the region; every move keeps an object's class,
+        so without this a chain from such a scene would sample, and score, outside it."""
+        objects = tuple(objects)
+        if all(id(o.cls) in self._class_ids for o in objects):
+            return objects  # the chain's own states: nothing to make again
+        model = self.model
+        return tuple(o if id(o.cls) in self._class_ids
+                     else make_object(model, model.object_class(o.cls.name), o.values)
+                     for o in objects)
 
     def evaluate(self, trace: Trace, proposal: moves.Proposal) -> Trace | None:
         """The proposed trace, or None where its prior is zero (out of a domain, overlapping),
