@@ -17,18 +17,16 @@ values and those of the objects taken away, as a fit of each class would start f
         (sppl.infer.fit: the better start) of a class c chosen by the fits of every class
         so started, with probability P(c | x-, i, j) (``merged_fits``: 0.95 times the
         softmax of their log joints, plus 0.05 / K);
-    split (x- + y -> x- + i + j): y uniform among the n - 1 objects, i a birth of a uniform
-        class into x- = the scene without y (sppl.infer.birth: near what x- leaves
-        unexplained, or the prior), and j from the refit proposal of a uniform class into
-        x- + i, starting from y: fitted beside the newborn, so that it gives up the pixels
-        the newborn explains instead of growing back over them.
+    split (x- + y -> x- + i + j): y uniform among the n - 1 objects, j from the refit proposal
+        of a uniform class into x- = the scene without y, starting from y, and i a birth of a
+        uniform class into x- (sppl.infer.birth: near what x- leaves unexplained, or the prior).
 
 A split is a merge's reverse: both go through the same x-, so the fits that the densities
 depend on are the same both ways (the split's reverse fits y, as every class, from its fitted
-j and its newborn i; the merge's reverse fits j from y into x- + i), and with K classes
+j and its newborn i), and with K classes
 
     log alpha_merge = log pi(x- + y) - log pi(x- + i + j)
-                      + log P(split) - log(n - 1) - 2 log K + log q_fit(j | x- + i, y)
+                      + log P(split) - log(n - 1) - 2 log K + log q_fit(j | x-, y)
                       + log q_birth(i | x-)
                       - log P(merge) + log n - log w(i, j) + log sum_l w(i, l)
                       - log P(c_y | x-, i, j) - log q_fit(y | x-, j, i)
@@ -47,7 +45,7 @@ newborns (m with probability c_MAX_TAKEN(m)), each a birth into the same x-. The
 gains, in the merge's density, c_M(m) and each further choice's probability, and in the
 split's c_MAX_TAKEN(m), one K and one
 q_birth per newborn; the newborns in the order drawn are the merged-away objects in the
-order chosen; a split's j is fitted beside all its newborns.
+order chosen.
 
 The fit of the merged object y (in a merge, and in a split's reverse) may search further
 than a refit's: from the model's ``merge_seeds`` seeds of x- as well, and polished by
@@ -170,19 +168,6 @@ def log_q_born(sampler, obj: SceneObject, state: Trace) -> float:
 
 def _without(objects, *places) -> tuple:
     return tuple(o for p, o in enumerate(objects) if p not in places)
-
-
-def _with(sampler, state: Trace, others) -> Trace:
-    """x- and a split's newborns (a merge's merged-away objects), in the order chosen: the
-    scene a split's object is fitted into, rendered once for the proposal that needs it."""
-    others = tuple(others)
-    kept = state.cache.get("with")
-    if kept is not None and len(kept[0]) == len(others) and all(
-            a is b for a, b in zip(kept[0], others)):
-        return kept[1]
-    made = sampler.make_trace(state.objects + others, state.noise)
-    state.cache["with"] = (others, made)
-    return made
 
 
 def merge_search(sampler) -> dict[str, int]:
@@ -322,7 +307,7 @@ def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None
                   + count_log_prob(len(taken), MAX_TAKEN)
                   - (1 + len(taken)) * math.log(n_classes)
                   + sum(log_q_born(sampler, o, state) for o in gone))
-    back, bound = fitting.refitted_back(sampler, _with(sampler, state, gone), old, new)
+    back, bound = fitting.refitted_back(sampler, state, old, new)
     return Proposal("merge", old.cls.name, merged, trace.noise, (new,),
                     log_q_back - log_q_forward, tries=tag, deferred=back, deferred_bound=bound)
 
@@ -331,10 +316,10 @@ def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None
                   state: Trace | None = None, fitted: SceneObject | None = None,
                   born: tuple[SceneObject, ...] | None = None,
                   born_places: tuple[int, ...] | None = None) -> Proposal | None:
-    """Split object k (uniform) into MORE births of uniform classes (MORE in 1..MAX_TAKEN,
-    ``draw_count``) and, in its place, an object of a uniform class fitted beside them;
-    given ``fitted``, ``born`` and ``born_places`` (their places in the split tuple), the
-    proposal of exactly those (a merge's reverse)."""
+    """Split object k (uniform) into a fitted object of a uniform class in its place and
+    MORE births of uniform classes (MORE in 1..MAX_TAKEN, ``draw_count``); given ``fitted``,
+    ``born`` and ``born_places`` (their places in the split tuple), the proposal of exactly
+    those (a merge's reverse)."""
     objects = trace.objects
     m = len(objects)
     if m < 1:
@@ -345,24 +330,23 @@ def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None
     old = objects[k]
     rest = _without(objects, k)
     state = state if state is not None else sampler.make_trace(rest, trace.noise)
-    if born is None:
-        born = tuple(
-            make_object(model, cls, sampler.birth.sample(cls, state, rng))
-            for cls in (model.classes[int(rng.integers(n_classes))]
-                        for _ in range(draw_count(rng, MAX_TAKEN))))
-        places = list(range(m))
-        for b in range(len(born)):
-            places.insert(int(rng.integers(len(places) + 1)), m + b)
-        born_places = tuple(places.index(m + b) for b in range(len(born)))
-    # The fitted object is fitted beside the newborns, so that it gives up to them the pixels
-    # they explain: fitted into x- alone it would grow back over them (y was the best fit
-    # there), and the split would always overlap or cover them.
-    fitted, forward = _refitted(sampler, _with(sampler, state, born), old, rng, fitted)
+    fitted, forward = _refitted(sampler, state, old, rng, fitted)
     replaced = objects[:k] + (fitted,) + objects[k + 1 :]
-    slots = iter(replaced)
-    by_place = dict(zip(born_places, born))
-    split = tuple(by_place[p] if p in by_place else next(slots)
-                  for p in range(len(replaced) + len(born)))
+    if born is None:
+        born, split = [], list(replaced)
+        for _ in range(draw_count(rng, MAX_TAKEN)):
+            cls = model.classes[int(rng.integers(n_classes))]
+            obj = make_object(model, cls, sampler.birth.sample(cls, state, rng))
+            born.append(obj)
+            split.insert(int(rng.integers(len(split) + 1)), obj)
+        born = tuple(born)
+        born_places = tuple(next(p for p, o in enumerate(split) if o is b) for b in born)
+        split = tuple(split)
+    else:
+        slots = iter(replaced)
+        by_place = dict(zip(born_places, born))
+        split = tuple(by_place[p] if p in by_place else next(slots)
+                      for p in range(len(replaced) + len(born)))
     j = next(p for p, o in enumerate(split) if o is fitted)
     tag = MergeSplit(state, j, born_places)
     if not (math.isfinite(fitted.log_prior) and all(math.isfinite(b.log_prior) for b in born)):
@@ -372,8 +356,7 @@ def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None
     log_q_forward = (_log(sampler.jump["split"]) - math.log(m)
                      + count_log_prob(len(born), MAX_TAKEN)
                      - (1 + len(born)) * math.log(n_classes)
-                     + fitting.log_mixture(sampler, _with(sampler, state, born), fitted.cls,
-                                           fitted.values, forward)
+                     + fitting.log_mixture(sampler, state, fitted.cls, fitted.values, forward)
                      + sum(log_q_born(sampler, b, state) for b in born))
     screen = screen_of(sampler)
     i, more = born_places[0], born_places[1:]
