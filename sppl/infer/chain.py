@@ -170,9 +170,6 @@ class Sampler:
         the sampler bound its region (a given starting scene, a truth to score) holds the
         unbound classes, whose prior ignores the region; every move keeps an object's class,
         so without this a chain from such a scene would sample, and score, outside it."""
-        objects = tuple(objects)
-        if all(id(o.cls) in self._class_ids for o in objects):
-            return objects  # the chain's own states: nothing to make again
         model = self.model
         return tuple(o if id(o.cls) in self._class_ids
                      else make_object(model, model.object_class(o.cls.name), o.values)
