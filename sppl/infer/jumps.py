@@ -16,7 +16,7 @@ import numpy as np
 
 from ..model.jumps import Jump, jump, register_jump
 from ..model.trace import Trace
-from . import fit, fitted_birth, merge, moves, tries
+from . import fit, fitted_birth, fitted_split, merge, moves, tries
 
 
 def _tries(sampler) -> int:
@@ -73,6 +73,14 @@ def propose_fitted_death(sampler, trace: Trace, rng: np.random.Generator):
     return fitted_birth.propose_fitted_death(sampler, trace, rng)
 
 
+def propose_fitted_split(sampler, trace: Trace, rng: np.random.Generator):
+    return fitted_split.propose_fitted_split(sampler, trace, rng)
+
+
+def propose_fitted_merge(sampler, trace: Trace, rng: np.random.Generator):
+    return fitted_split.propose_fitted_merge(sampler, trace, rng)
+
+
 def undo_drawn(sampler, before: Trace, proposal, after: Trace):
     """The reverse of a proposal that keeps what it drew (the multiple-try jumps' candidates,
     a refit's or a merge's scene without its objects) through those same draws; of one that
@@ -93,6 +101,10 @@ register_jump(Jump("merge", propose_merge, "split", undo_drawn),
 register_jump(Jump("fitted_birth", propose_fitted_birth, "fitted_death", undo_drawn,
                    needs_observations=True),
               Jump("fitted_death", propose_fitted_death, "fitted_birth", undo_drawn,
+                   needs_observations=True))
+register_jump(Jump("fitted_split", propose_fitted_split, "fitted_merge", undo_drawn,
+                   needs_observations=True),
+              Jump("fitted_merge", propose_fitted_merge, "fitted_split", undo_drawn,
                    needs_observations=True))
 
 

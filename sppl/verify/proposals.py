@@ -496,13 +496,14 @@ def check_proposals(model: Model, *, seed=0, size: int = 16, draws: int = 150,
     rows: list[Row] = []
     notes: list[str] = []
     if sampler.birth.weight > 0 and _uses(sampler, "birth", "replace", "split", "refit",
-                                           "merge"):
+                                           "merge", "fitted_split", "fitted_merge"):
         for cls in model.classes:
             if cls.position:
                 rows += birth_rows(sampler, state, cls, rng, draws, weights)
     else:
         notes.append("proposals: births do not look at the observations (data_birth = 0).")
-    if _uses(sampler, "refit", "merge", "split", "fitted_birth", "fitted_death"):
+    if _uses(sampler, "refit", "merge", "split", "fitted_birth", "fitted_death",
+             "fitted_split", "fitted_merge"):
         for cls in model.classes:
             rows += refit_rows(sampler, state, cls, missing, rng, draws, weights)
     if _uses(sampler, "refit") and model.inference.refit_focus > 0.0:
@@ -512,14 +513,14 @@ def check_proposals(model: Model, *, seed=0, size: int = 16, draws: int = 150,
                          "of object any doubt; the choice untested.")
         else:
             rows += refit_choice_rows(sampler, chosen, rng, partner_draws)
-    if _uses(sampler, "fitted_birth", "fitted_death") and \
+    if _uses(sampler, "fitted_birth", "fitted_death", "fitted_split", "fitted_merge") and \
             len(fitted_birth.placed_classes(model)) > 1:
         classes = fitted_class_rows(sampler, state, rng, partner_draws)
         if not classes:
             notes.append("proposals: the scene less one object left no seed for a fitted "
                          "birth; its choice of class untested.")
         rows += classes
-    if _uses(sampler, "merge", "split"):
+    if _uses(sampler, "merge", "split", "fitted_split", "fitted_merge"):
         crowded = crowded_state(sampler, state.noise, rng)
         if crowded is None:
             notes.append("proposals: no state of three or more objects gave a merge partner "
