@@ -73,6 +73,15 @@ def split_strips():
     return flat_world("strip", (0.8, 40.0), 1.0, 2.0, ("fitted_split", "fitted_merge"), 2)
 
 
+def test_a_merge_into_a_scene_without_seeds_is_rejected_not_reversed(require_gl):
+    """Two strips merged into the one the observations show leave no seed, so no fitted
+    split could give them back: the merge is rejected (None), where a proposal with a zero
+    ratio sent the move checks after a reverse that does not exist (seed 0 here, and
+    `sppl verify` on models/tabletop.scn with the pair weighed)."""
+    report = verify.move_checks(split_strips(), states=30, seed=0, size=8)
+    assert report.passed, report.table()
+
+
 def strips_report(seed=0):
     model = split_strips()
     truth = (make_object(model, model.classes[0], {"x": 0.3, "y": 0.0}),)

@@ -119,7 +119,7 @@ def propose_fitted_split(sampler, trace: Trace, rng: np.random.Generator, k: int
     tag = FittedSplit(whole, state, s, k, j, p)
     label = old.cls.name
     if not math.isfinite(born.log_prior):
-        return Proposal("fitted_split", label, objects, trace.noise, (), -math.inf, tries=tag)
+        return None  # rejected before j is fitted: nothing to render or to reverse
     beside = _full(sampler, trace, rest + (born,))
     forward = fitting.fit(sampler, beside, old.cls, old)
     if fitted is None:
@@ -175,8 +175,7 @@ def propose_fitted_merge(sampler, trace: Trace, rng: np.random.Generator, i: int
     whole = whole if whole is not None else _full(sampler, trace, merged)
     seeds = sampler.birth.seeds(whole)
     if not len(seeds):
-        return Proposal("fitted_merge", label, merged, trace.noise, (new,), -math.inf,
-                        tries=FittedSplit(whole, state, -1, k, j, i))
+        return None  # no fitted split leaves x- + y: rejected, as it has no reverse
     log_rho = seed_log_probs(seeds, born)
     s = int(rng.choice(len(seeds), p=np.exp(log_rho - np.logaddexp.reduce(log_rho)))) \
         if seed is None else seed
