@@ -103,7 +103,9 @@ class FittedJump:
                                     target=gone, place=self.place, state=self.state)
 
 
-def _full(sampler, trace: Trace, objects) -> Trace:
+def full_state(sampler, trace: Trace, objects) -> Trace:
+    """The scene of these objects under the trace's noise, rendered in full: the state a fit
+    starts from, built alike by a move and its reverse."""
     return sampler.make_trace(tuple(objects), trace.noise)
 
 
@@ -117,7 +119,7 @@ def propose_fitted_birth(sampler, trace: Trace, rng: np.random.Generator,
     classes = placed_classes(model)
     if not classes:
         return None
-    state = state if state is not None else _full(sampler, trace, trace.objects)
+    state = state if state is not None else full_state(sampler, trace, trace.objects)
     seeds = sampler.birth.seeds(state)
     if not len(seeds):
         return None
@@ -156,7 +158,7 @@ def propose_fitted_death(sampler, trace: Trace, rng: np.random.Generator, k: int
         return None
     classes = placed_classes(sampler.model)
     rest = trace.objects[:k] + trace.objects[k + 1 :]
-    state = state if state is not None else _full(sampler, trace, rest)
+    state = state if state is not None else full_state(sampler, trace, rest)
     seeds = sampler.birth.seeds(state)
     if not len(seeds):
         return None

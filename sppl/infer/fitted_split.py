@@ -45,7 +45,7 @@ import numpy as np
 
 from ..model.trace import SceneObject, Trace, make_object
 from . import fit as fitting
-from .fitted_birth import class_choice, placed_classes, seed_log_probs
+from .fitted_birth import class_choice, full_state, placed_classes, seed_log_probs
 from .merge import partner_log_weights, screen_of
 from .moves import Proposal, _log
 
@@ -75,10 +75,6 @@ class FittedSplit:
                                     whole=self.whole, state=self.state)
 
 
-def _full(sampler, trace: Trace, objects) -> Trace:
-    return sampler.make_trace(tuple(objects), trace.noise)
-
-
 def newborn_log_density(classes, state: Trace, born: SceneObject, fits, log_p) -> float:
     """log P(c_i | x-, s) + log q_fit(i | fit(x-, c_i, s)) of the newborn, from the class
     choice at the seed (looked up when called, so that a test can put a wrong one in its
@@ -101,7 +97,7 @@ def propose_fitted_split(sampler, trace: Trace, rng: np.random.Generator, k: int
     classes = placed_classes(model)
     if m < 1 or not classes:
         return None
-    whole = whole if whole is not None else _full(sampler, trace, objects)
+    whole = whole if whole is not None else full_state(sampler, trace, objects)
     seeds = sampler.birth.seeds(whole)
     if not len(seeds):
         return None
@@ -109,7 +105,7 @@ def propose_fitted_split(sampler, trace: Trace, rng: np.random.Generator, k: int
     s = int(rng.integers(len(seeds))) if seed is None else seed
     old = objects[k]
     rest = objects[:k] + objects[k + 1 :]
-    state = state if state is not None else _full(sampler, trace, rest)
+    state = state if state is not None else full_state(sampler, trace, rest)
     fits, log_p = class_choice(sampler, state, seeds[s])
     if born is None:
         c = fitting.draw_class(rng, log_p)
@@ -120,7 +116,7 @@ def propose_fitted_split(sampler, trace: Trace, rng: np.random.Generator, k: int
     label = old.cls.name
     if not math.isfinite(born.log_prior):
         return None  # rejected before j is fitted: nothing to render or to reverse
-    beside = _full(sampler, trace, rest + (born,))
+    beside = full_state(sampler, trace, rest + (born,))
     forward = fitting.fit(sampler, beside, old.cls, old)
     if fitted is None:
         fitted = make_object(model, old.cls, fitting.sample(sampler, beside, old.cls, forward, rng))
@@ -162,7 +158,7 @@ def propose_fitted_merge(sampler, trace: Trace, rng: np.random.Generator, i: int
     j = int(rng.choice(n, p=np.exp(logw))) if j is None else j
     piece = objects[j]
     rest = tuple(o for p, o in enumerate(objects) if p not in (i, j))
-    state = state if state is not None else _full(sampler, trace, rest)
+    state = state if state is not None else full_state(sampler, trace, rest)
     forward = fitting.fit(sampler, state, piece.cls, piece, also=(born,))
     new = target if target is not None else make_object(
         model, piece.cls, fitting.sample(sampler, state, piece.cls, forward, rng))
@@ -172,7 +168,7 @@ def propose_fitted_merge(sampler, trace: Trace, rng: np.random.Generator, i: int
     if not math.isfinite(new.log_prior):
         return Proposal("fitted_merge", label, merged, trace.noise, (new,), -math.inf,
                         tries=FittedSplit(None, state, -1, k, j, i))
-    whole = whole if whole is not None else _full(sampler, trace, merged)
+    whole = whole if whole is not None else full_state(sampler, trace, merged)
     seeds = sampler.birth.seeds(whole)
     if not len(seeds):
         return None  # no fitted split leaves x- + y: rejected, as it has no reverse
@@ -186,7 +182,7 @@ def propose_fitted_merge(sampler, trace: Trace, rng: np.random.Generator, i: int
     # log q(reverse), less the newborn's class choice and fitted density and the refit's
     # density of j, which are deferred (every placed class fitted at the seed, and one fit).
     log_q_back = _log(sampler.jump["fitted_split"]) - math.log(n - 1) - math.log(len(seeds))
-    beside = _full(sampler, trace, rest + (born,))
+    beside = full_state(sampler, trace, rest + (born,))
 
     def back() -> float:
         fits, log_p = class_choice(sampler, state, seeds[s])
