@@ -115,7 +115,9 @@ def run_model(name: str, model_path: Path, args, work: Path) -> list[dict]:
                        observed_seconds=r["observed_seconds"],
                        unobserved={"objects": sorted(observed.droppable),
                                    "values": {f"{k}.{n}": sorted(v)
-                                              for (k, n), v in observed.free.items() if v}})
+                                              for (k, n), v in observed.free.items() if v},
+                                   "classes": {str(k): sorted(v)
+                                               for k, v in observed.classes.items() if v}})
         rows.append(row)
         seconds = f"{r['seconds']:.1f}" if solved else "-"
         seen = "" if observed is None else " {:>8}".format(

@@ -142,16 +142,20 @@ class ObservedCheck(Check):
     ``occlusion_check`` does for the occlusion example's cone, here for every object and
     value: a true object whose removal leaves the true scene's log joint within ``nats`` of
     its own (a sphere under a pixel across, an object hidden behind others in every view)
-    need not be found, and a categorical value of a true object that can be changed within
-    ``nats`` (a colour that only a depth camera sees) need not be right. ``droppable`` holds
-    the places of such objects in the truth, ``free`` the values each (place, parameter)
-    may take. An estimated object stands for the true object it is matched to by position
-    (``match_objects``, within ``tolerance``)."""
+    need not be found, a categorical value of a true object that can be changed within
+    ``nats`` (a colour that only a depth camera sees) need not be right, and nor need the
+    class of a true object that another class, fitted in its place, explains within
+    ``nats`` (a ball 9 cm across that four depth pixels show, read as a cube). ``droppable``
+    holds the places of such objects in the truth, ``free`` the values each (place,
+    parameter) may take, ``classes`` the other classes each place may take. An estimated
+    object stands for the true object it is matched to by position (``match_objects``,
+    within ``tolerance``)."""
 
-    def __init__(self, truth, tolerance: float, droppable, free) -> None:
+    def __init__(self, truth, tolerance: float, droppable, free, classes=None) -> None:
         super().__init__(truth, tolerance)
         self.droppable = frozenset(droppable)
         self.free = {k: frozenset(v) for k, v in free.items()}
+        self.classes = {k: frozenset(v) for k, v in (classes or {}).items()}
 
     def _asked(self, estimate):
         """(the estimate with each free value read as the truth's, the true objects asked
@@ -160,6 +164,8 @@ class ObservedCheck(Check):
         matched = set()
         for e, t, _ in match_objects(estimate, self.truth, self.tolerance):
             matched.add(t)
+            if estimate[e]["class"] in self.classes.get(t, ()):
+                estimate[e]["class"] = self.truth[t]["class"]
             for name, value in self.truth[t]["params"].items():
                 if estimate[e]["params"].get(name) in self.free.get((t, name), ()):
                     estimate[e]["params"][name] = value
@@ -177,7 +183,11 @@ def observed_check(model, obs, scene_file: Path, tolerance: float,
                    nats: float = ALLOWED_NATS) -> ObservedCheck:
     """The ``ObservedCheck`` of the true scene in ``scene_file`` (the observations' own
     ``scene.json``, with their noise): the log joint of the truth without each object in
-    turn, and with each categorical value of each object changed, against the truth's."""
+    turn, with each categorical value of each object changed, and with each object replaced
+    by each other placed class fitted in its place (``sppl.infer.fit.scored_fit`` from the
+    true object: a search, so a class it fits worse than it could stays asked for), against
+    the truth's."""
+    from sppl.infer import fit as fitting
     from sppl.infer.chain import Sampler
     from sppl.model.simulate import load_scene
     from sppl.model.trace import make_object
@@ -202,9 +212,15 @@ def observed_check(model, obs, scene_file: Path, tolerance: float,
                         and score(objects[:k] + (make_object(model, o.cls, {**o.values,
                                                                             p.name: v}),)
                                   + objects[k + 1:]) >= best - nats]
+        classes = {}
+        for k, o in enumerate(objects):
+            rest = sampler.make_trace(objects[:k] + objects[k + 1:], noise)
+            classes[k] = [c.name for c in model.classes
+                          if c is not o.cls and c.position
+                          and fitting.scored_fit(sampler, rest, c, o)[1] >= best - nats]
     finally:
         renderer.release()
-    return ObservedCheck(truth, tolerance, droppable, free)
+    return ObservedCheck(truth, tolerance, droppable, free, classes)
 
 
 def occlusion_check(model, obs, scene, tolerance: float, nats: float = ALLOWED_NATS):
