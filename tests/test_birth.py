@@ -219,36 +219,3 @@ def test_a_speck_apart_from_the_drawn_edges_is_kept_and_one_along_them_is_not():
     blob[16:22, 16:22] = (0.1, 0.2, 0.8)
     assert not specks(blob).any() and birth._blobs(
         np.abs(blob - rendered).mean(axis=-1) > birth.COLOUR_GAP).sum() == 16
-
-
-def test_a_depth_speck_before_what_is_drawn_is_kept_and_an_edge_a_pixel_off_is_not():
-    """A floor 5 m away with a box drawn at 3 m: two by two pixels at 2 m, in front of the
-    box's edge, are a depth speck; the box's edge measured a pixel wider than drawn is not
-    (it stands no nearer than the box beside it), nor a lone outlier, nor two neighbouring
-    outliers whose depths disagree, nor the pixels of a blob, which seeds on its own."""
-    from sppl.infer import birth
-
-    rendered = np.full((24, 24), 5.0)
-    rendered[8:14, 8:14] = 3.0
-    gap, speck_gap = 0.1, 0.3
-
-    def specks(observed):
-        flagged = observed < rendered - gap
-        return birth._depth_specks(flagged, birth._blobs(flagged), observed, rendered,
-                                   speck_gap, gap)
-
-    small = rendered.copy()
-    small[12:14, 13:15] = (2.0, 2.05)
-    assert np.argwhere(specks(small)).tolist() == [[12, 13], [12, 14], [13, 13], [13, 14]]
-    wider = rendered.copy()
-    wider[8:14, 14] = 3.0
-    assert not specks(wider).any()
-    lone = rendered.copy()
-    lone[20, 3] = 1.0
-    assert not specks(lone).any()
-    disagree = rendered.copy()
-    disagree[20, 3:5] = (1.0, 3.5)
-    assert not specks(disagree).any()
-    blob = rendered.copy()
-    blob[16:22, 16:22] = 2.0
-    assert not specks(blob).any() and birth._blobs(blob < rendered - gap).sum() == 16

@@ -86,59 +86,6 @@ def test_an_object_a_pixel_across_seeds_a_birth(root, require_gl, tmp_path, monk
     assert len(seeds(objects[:1])) == 0
 
 
-def test_objects_a_few_depth_pixels_across_seed_births_once_nothing_larger_is_missing(
-        root, require_gl, tmp_path, monkeypatch):
-    """A red cube 9 cm wide and a red sphere 11 cm across stand before a green cube 0.6 m
-    wide (shapes_plus.scn's prior scene 4, 5 cm noise, one depth pixel in a hundred
-    anything): each covers a few depth pixels 2.5 to 3 m nearer than the render, which the
-    erosion leaves nothing of, beside the green cube's edges in the RGB camera, which leaves
-    them no speck there. As depth specks they seed a birth on each where the state misses
-    nothing larger; where it also misses a large blue sphere, only the sphere's blob seeds
-    (the specks are seeds of last resort). With every object in place nothing seeds, and
-    without depth specks nothing seeds the small two."""
-    import json
-
-    from sppl.data.observations import load_observations
-    from sppl.infer import birth
-    from sppl.lang import load_model
-    from sppl.model.simulate import load_scene
-    from sppl.render import Renderer
-    from sppl.runs.experiment import simulate
-    from sppl.scoring.scorer import Scorer
-
-    scene = {"objects": [
-        {"class": "cube", "params": {"x": 0.218, "y": 1.891, "a": 0.592, "s": 0.616,
-                                     "c": "green"}},
-        {"class": "cube", "params": {"x": -0.13, "y": 1.538, "a": 0.681, "s": 0.09, "c": "red"}},
-        {"class": "sphere", "params": {"x": 0.763, "y": 1.495, "r": 0.057, "c": "red"}},
-        {"class": "sphere", "params": {"x": 0.168, "y": -1.292, "r": 1.052, "c": "blue"}}],
-        "noise": {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05, "outlier": 0.01}}}
-    (tmp_path / "scene.json").write_text(json.dumps(scene))
-    path = root / "models" / "shapes_plus.scn"
-    obs_path = simulate(path, root / "examples" / "models" / "shapes_plus" / "cameras.json",
-                        tmp_path / "scene.json", tmp_path / "obs", seed=2030)
-    model = load_model(path)
-    objects, noise = load_scene(model, obs_path / "scene.json")
-    scorer = Scorer(model, load_observations(obs_path), Renderer(model.render))
-
-    def seeds(state_objects):
-        sampler = Sampler(model, scorer, np.random.default_rng(0))
-        return sampler.birth.seeds(sampler.make_trace(state_objects, noise))
-
-    green, ball = objects[0], objects[3]
-    found = seeds((green, ball))
-    small = np.array([[-0.13, 1.538], [0.763, 1.495]])
-    dist = np.linalg.norm(found[:, None] - small[None], axis=-1)
-    assert len(found) == 2 and np.all(dist.min(axis=0) < 0.1), found
-    assert len(seeds(objects)) == 0
-    larger = seeds((green,))
-    near_small = np.linalg.norm(larger[:, None] - small[None], axis=-1).min(axis=0)
-    assert len(larger) >= 1 and np.all(near_small > 0.3), larger
-    monkeypatch.setattr(birth, "_depth_specks", lambda flagged, *_: np.zeros_like(flagged))
-    assert len(seeds((green, ball))) == 0
-    assert np.array_equal(seeds((green,)), larger)
-
-
 def test_a_fitted_birth_finds_the_missing_object(setting):  # noqa: F811
     """With the blue sphere missing, fitted births propose it: of 12, several have the right
     class and colour within 0.1 m, and such a proposal is accepted."""

@@ -155,26 +155,3 @@ def test_render_script_makes_a_folder_that_agrees(tmp_path, renderers, models):
     frame = next(f for f in load_observations(out).frames if f.depth is not None)
     median, far = depth_agreement(frame, model, objects, renderers(model))
     assert median < 0.025 and far < 0.02, (median, far)
-
-
-@pytest.mark.parametrize("renderer", ["cycles", "sppl"])
-@pytest.mark.parametrize("name", NAMES)
-def test_the_truth_leaves_no_depth_speck(name, renderer, renderers, models):
-    """Cycles mixes the depths of the two surfaces an edge parts, where sppl draws a step: at
-    the true scene none of that counts as a depth speck (``sppl.infer.birth``), which would
-    seed births along every edge once nothing larger is missing. (A depth speck that needed
-    to stand nearer than the render only at itself, not at its neighbours too, left specks
-    in four of these scenes.)"""
-    from sppl.infer.chain import Sampler
-    from sppl.scoring.scorer import Scorer
-
-    model = models[entry(name)["model"]]
-    folder = TESTBED / name / renderer
-    objects, _ = load_scene(model, folder / "scene.json")
-    # Cycles' folder holds the sensors' noise only; depth specks do not depend on the noise,
-    # and sppl's folder has every noise parameter the model scores with.
-    _, noise = load_scene(model, TESTBED / name / "sppl" / "scene.json")
-    sampler = Sampler(model, Scorer(model, load_observations(folder), renderers(model)),
-                      np.random.default_rng(0))
-    trace = sampler.make_trace(objects, noise)
-    assert sampler.birth._depth_speck_seeds(trace.renders) == []

@@ -47,13 +47,6 @@ COLOUR_GAP = 0.1
 # in ten million pixels).
 STRONG_COLOUR_GAP = 0.2
 STRONG_SIGMAS = 4.0
-# An object too small for a depth blob (a sphere 11 cm across, 4 m from a 96x96 camera,
-# covers two by two pixels) stands far nearer than what is drawn behind it: a speck of depth
-# pixels seeds when at least two neighbours agree and stand this many times the map's noise
-# nearer than the render at and around them. At 4 sigma, two neighbours of the far plane's
-# noise seeded in a scene with every object in place; at 6, one of 30 noise draws of the
-# shapes_plus example seeded at its truth (two neighbouring outliers of the depth mixture).
-SPECK_SIGMAS = 6.0
 # At most this many points describe a state (an even stride over the unexplained pixels), so
 # that the density costs microseconds.
 MAX_POINTS = 400
@@ -79,8 +72,6 @@ class BirthProposal:
         self.depth_gaps = {t.frame: max(DEPTH_GAP, 2.0 * depth_noise(t.observed, t.valid,
                                                                       t.camera.depth_max))
                            for t in self.terms if t.kind == "depth"}
-        self.speck_gaps = {t.frame: max(self.depth_gaps[t.frame], SPECK_SIGMAS * depth_noise(
-            t.observed, t.valid, t.camera.depth_max)) for t in self.terms if t.kind == "depth"}
         self._static_depth = None
         self.strong_gaps = {t.frame: max(STRONG_COLOUR_GAP,
                                          STRONG_SIGMAS * image_noise(t.observed))
@@ -158,11 +149,6 @@ class BirthProposal:
         return _cached(trace, "birth_seeds", self._seeds)
 
     def _seeds(self, renders) -> np.ndarray:
-        found = self._blob_seeds(renders) or self._depth_speck_seeds(renders)
-        found.sort(key=lambda f: (-f[0], f[1]))
-        return np.array([f[2] for f in found[:MAX_SEEDS]]).reshape(-1, 2)
-
-    def _blob_seeds(self, renders) -> list:
         found = []  # (pixels, order found, point)
         for mask, pts, strong in self._unexplained(renders):
             labels, count = ndimage.label(mask, structure=_CROSS)
@@ -172,35 +158,8 @@ class BirthProposal:
                 mine = pts[here]
                 if len(mine) >= SEED_PIXELS or strong[here].any():
                     found.append((len(mine), len(found), np.median(mine, axis=0)))
-        return found
-
-    def _depth_speck_seeds(self, renders) -> list:
-        """Seeds of last resort: where a state leaves no blob and no RGB speck, the depth
-        specks (``_depth_specks``), each seeding at the median of its ground points.
-        Looked for only then because, while objects are missing or misplaced, a misplaced
-        object's rim leaves pieces of depth that pass for specks, and small objects fitted
-        there hold the state where it is (benchmarks/README.md); once every blob is
-        explained, a small object a few depth pixels across is what is left to find."""
-        found = []
-        for t in self.terms:
-            if t.kind != "depth":
-                continue
-            dirs, ray_to_z, centre = self.rays[t.frame]
-            rendered = self.scorer.rendered(renders, t)
-            gap = self.depth_gaps[t.frame]
-            flagged = t.observed < rendered - gap
-            flagged &= _measured(t.observed, t.valid, t.camera.depth_max)
-            specks = _depth_specks(flagged, _blobs(flagged), t.observed, rendered,
-                                   self.speck_gaps[t.frame], gap)
-            labels, count = ndimage.label(specks, structure=_CROSS)
-            for piece in range(1, count + 1):
-                here = labels == piece
-                dist = t.observed[here]
-                if t.camera.depth_type == "z":
-                    dist = dist / ray_to_z[here]
-                pts = (centre + dirs[here] * dist[:, None])[:, :2]
-                found.append((len(pts), len(found), np.median(pts, axis=0)))
-        return found
+        found.sort(key=lambda f: (-f[0], f[1]))
+        return np.array([f[2] for f in found[:MAX_SEEDS]]).reshape(-1, 2)
 
     # -- sampling and density ------------------------------------------------------------------
 
@@ -312,33 +271,6 @@ def _specks(flagged: np.ndarray, blobs: np.ndarray, strong: np.ndarray,
     keep[np.unique(labels[drawn])] = False
     keep[0] = False
     return keep[labels]
-
-
-def _depth_specks(flagged: np.ndarray, blobs: np.ndarray, observed: np.ndarray,
-                  rendered: np.ndarray, gap: float, agree_within: float) -> np.ndarray:
-    """The depth pixels of an object too small for a blob that stands in front of what the
-    state draws: of each piece of ``flagged`` (4-connected) with fewer than SEED_PIXELS
-    pixels of ``blobs``, the pixels nearer by ``gap`` than the render at and around them (at
-    each of the eight neighbours too) whose depth such a neighbour's agrees with (within
-    ``agree_within``), where at least two are. An edge the state draws a pixel off measures
-    the depth the render has beside it, so fails the first; a sensor outlier, drawn anywhere
-    in the camera's range, seldom has a neighbour that agrees with it."""
-    apart = flagged & (observed < ndimage.minimum_filter(rendered, size=3) - gap)
-    agree = np.zeros_like(flagged)
-    for axis in (0, 1):
-        n = flagged.shape[axis]
-        a = (slice(None),) * axis + (slice(1, n),)
-        b = (slice(None),) * axis + (slice(0, n - 1),)
-        pair = apart[a] & apart[b] & (np.abs(observed[a] - observed[b]) < agree_within)
-        agree[a] |= pair
-        agree[b] |= pair
-    labels, count = ndimage.label(flagged, structure=_CROSS)
-    if not count:
-        return np.zeros_like(flagged)
-    keep = np.bincount(labels[agree], minlength=count + 1) >= 2
-    keep &= np.bincount(labels[blobs], minlength=count + 1) < SEED_PIXELS
-    keep[0] = False
-    return keep[labels] & agree
 
 
 def _edges(rendered: np.ndarray) -> np.ndarray:
