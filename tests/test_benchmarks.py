@@ -143,10 +143,9 @@ def test_observed_check_asks_only_what_the_observations_tell(root):
         assert strict(estimate) == plain(estimate)
 
 
-def test_observed_check_frees_the_colours_no_image_shows(root, require_gl, tmp_path):
-    """Scene 4 of shapes.scn's benchmark: its small blue cube and small green sphere stand
-    behind the large red cube as the one RGB camera sees it, so only the depth camera sees
-    them, and their colours are free; every other colour, and every object, is asked for."""
+def _observed_check_of(root, tmp_path, name: str, i: int):
+    """Scene i of model ``name``'s prior benchmark, rendered as the benchmark renders it, and
+    its ``ObservedCheck``."""
     import json
 
     from sppl.data.observations import load_observations
@@ -154,14 +153,21 @@ def test_observed_check_frees_the_colours_no_image_shows(root, require_gl, tmp_p
     from sppl.runs.experiment import simulate
 
     prior_scenes, tts = _benchmarks(root)
-    scene = prior_scenes.scenes_of("shapes", 5, prior_scenes.SEED)[4]
+    scene = prior_scenes.scenes_of(name, i + 1, prior_scenes.SEED)[i]
     path = tmp_path / "scene.json"
     path.write_text(json.dumps(scene))
-    obs_path = simulate(root / "models" / "shapes.scn",
-                        root / "examples" / "models" / "shapes" / "cameras.json", path,
-                        tmp_path / "obs", seed=prior_scenes.SEED + 4)
-    check = tts.observed_check(load_model(root / "models" / "shapes.scn"),
-                               load_observations(obs_path), obs_path / "scene.json", 0.15)
+    obs_path = simulate(root / "models" / f"{name}.scn",
+                        root / "examples" / "models" / name / "cameras.json", path,
+                        tmp_path / "obs", seed=prior_scenes.SEED + i)
+    return scene, tts.observed_check(load_model(root / "models" / f"{name}.scn"),
+                                     load_observations(obs_path), obs_path / "scene.json", 0.15)
+
+
+def test_observed_check_frees_the_colours_no_image_shows(root, require_gl, tmp_path):
+    """Scene 4 of shapes.scn's benchmark: its small blue cube and small green sphere stand
+    behind the large red cube as the one RGB camera sees it, so only the depth camera sees
+    them, and their colours are free; every other colour, and every object, is asked for."""
+    _, check = _observed_check_of(root, tmp_path, "shapes", 4)
     assert check.droppable == frozenset()
     free = {k: v for k, v in check.free.items() if v}
     assert free == {(1, "c"): {"green", "red"}, (4, "c"): {"blue", "red"}}, free
@@ -171,22 +177,9 @@ def test_observed_check_frees_the_class_a_few_pixels_cannot_tell(root, require_g
     """Scene 25 of shapes_plus.scn's benchmark: a blue cube 4 cm wide, a pixel or two in
     each camera, is explained as well by a sphere or a cylinder fitted in its place, so its
     class is free; the wide blue cone beside it is a cone, and nothing else is free."""
-    import json
-
-    from sppl.data.observations import load_observations
-    from sppl.lang import load_model
-    from sppl.runs.experiment import simulate
-
-    prior_scenes, tts = _benchmarks(root)
-    scene = prior_scenes.scenes_of("shapes_plus", 26, prior_scenes.SEED)[25]
+    _, tts = _benchmarks(root)
+    scene, check = _observed_check_of(root, tmp_path, "shapes_plus", 25)
     assert [o["class"] for o in scene["objects"]] == ["cone", "cube"]
-    path = tmp_path / "scene.json"
-    path.write_text(json.dumps(scene))
-    obs_path = simulate(root / "models" / "shapes_plus.scn",
-                        root / "examples" / "models" / "shapes_plus" / "cameras.json", path,
-                        tmp_path / "obs", seed=prior_scenes.SEED + 25)
-    check = tts.observed_check(load_model(root / "models" / "shapes_plus.scn"),
-                               load_observations(obs_path), obs_path / "scene.json", 0.15)
     assert {k: v for k, v in check.classes.items() if v} == {1: {"sphere", "cylinder"}}
     assert check.droppable == frozenset() and not any(check.free.values())
     cone, cube = scene["objects"]
