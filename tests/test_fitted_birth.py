@@ -48,15 +48,13 @@ def test_seeds_sit_on_the_missing_objects(setting):  # noqa: F811
     assert len(sampler.birth.seeds(full)) == 0
 
 
-def test_an_object_a_pixel_across_seeds_a_birth(root, require_gl, tmp_path, monkeypatch):
-    """A blue sphere 4 cm across, 4 m from a 96x96 camera, covers a pixel, which leaves no
-    blob: its pixel, far off the floor's colour, is a speck that seeds a fitted birth on it.
-    With every object in place the sensor noise seeds nothing; and without specks (the
-    threshold out of reach) nothing seeds the sphere."""
+def _tiny_sphere(root, tmp_path):
+    """shapes.scn's prior scene 2, less two objects: a red cube and a blue sphere 4 cm
+    across, 4 m from the example's 96x96 cameras, observed (the objects, their noise, and a
+    maker of samplers given the observations)."""
     import json
 
     from sppl.data.observations import load_observations
-    from sppl.infer import birth
     from sppl.lang import load_model
     from sppl.model.simulate import load_scene
     from sppl.render import Renderer
@@ -74,9 +72,24 @@ def test_an_object_a_pixel_across_seeds_a_birth(root, require_gl, tmp_path, monk
     model = load_model(path)
     objects, noise = load_scene(model, obs_path / "scene.json")
 
+    def sampler():
+        return Sampler(model, Scorer(model, load_observations(obs_path),
+                                     Renderer(model.render)), np.random.default_rng(0))
+
+    return objects, noise, sampler
+
+
+def test_an_object_a_pixel_across_seeds_a_birth(root, require_gl, tmp_path, monkeypatch):
+    """A blue sphere 4 cm across, 4 m from a 96x96 camera, covers a pixel, which leaves no
+    blob: its pixel, far off the floor's colour, is a speck that seeds a fitted birth on it.
+    With every object in place the sensor noise seeds nothing; and without specks (the
+    threshold out of reach) nothing seeds the sphere."""
+    from sppl.infer import birth
+
+    objects, noise, make_sampler = _tiny_sphere(root, tmp_path)
+
     def seeds(state_objects):
-        sampler = Sampler(model, Scorer(model, load_observations(obs_path),
-                                        Renderer(model.render)), np.random.default_rng(0))
+        sampler = make_sampler()
         return sampler.birth.seeds(sampler.make_trace(state_objects, noise))
 
     found = seeds(objects[:1])
@@ -84,6 +97,29 @@ def test_an_object_a_pixel_across_seeds_a_birth(root, require_gl, tmp_path, monk
     assert len(seeds(objects)) == 0
     monkeypatch.setattr(birth, "STRONG_COLOUR_GAP", math.inf)
     assert len(seeds(objects[:1])) == 0
+
+
+def test_a_sphere_a_pixel_across_is_fitted_at_its_seed(root, require_gl, tmp_path, monkeypatch):
+    """At the tiny sphere's seed (3 cm from it) the sphere's fit lands on it: within 1 cm, its
+    radius within 5 mm, gaining more than 30 nats (it is worth 56 in the scene this comes
+    from). That needs the search that settles the object's size with its place held at the
+    seed (``fit.SETTLE_EVALUATIONS``): without it the search from a prior draw's size moved
+    the place in steps of 40 cm as it shrank, and its sphere explains nothing."""
+    objects, noise, make_sampler = _tiny_sphere(root, tmp_path)
+    sampler = make_sampler()
+    state = fitted_birth.full_state(sampler, sampler.make_trace(objects[:1], noise),
+                                    objects[:1])
+    sphere = sampler.model.object_class("sphere")
+
+    def fitted():
+        seed = sampler.birth.seeds(state)[0]
+        values, score = fitted_birth.fit_at(sampler, state, sphere, seed)
+        return (math.hypot(values["x"] + 0.128, values["y"] + 1.022) < 0.01
+                and abs(values["r"] - 0.02) < 0.005 and score - state.score > 30)
+
+    assert fitted()
+    monkeypatch.setattr(fitting, "SETTLE_EVALUATIONS", 0)
+    assert not fitted()
 
 
 def test_a_fitted_birth_finds_the_missing_object(setting):  # noqa: F811
@@ -104,6 +140,28 @@ def test_a_fitted_birth_finds_the_missing_object(setting):  # noqa: F811
             new = sampler.evaluate(state, p)
             accepted += new is not None and sampler.log_alpha(state, p, new) > 0
     assert hits >= 2 and accepted >= 1
+
+
+def test_a_large_sphere_is_fitted_by_the_search_that_moves_its_place(setting, monkeypatch):  # noqa: F811
+    """The missing blue sphere is 60 cm wide and its seeds 25 cm or more from its centre: the
+    sphere's fit at each of them is the sphere (within 3 cm, its radius within 2 cm). The
+    search with the place held at the seed alone fits a smaller sphere where the seed is, so
+    a fit must also search without it (``fit._held_search`` runs both)."""
+    model, truth, shared = setting
+    sampler = Sampler(with_fitted(model), shared.scorer, np.random.default_rng(1))
+    state = sampler.make_trace(truth[:1], {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}})
+    ball, cls = truth[1].values, sampler.model.object_class("sphere")
+
+    def on_it():
+        fits = [fitted_birth.fit_at(sampler, state, cls, s)[0]
+                for s in sampler.birth.seeds(state)]
+        return [math.hypot(v["x"] - ball["x"], v["y"] - ball["y"]) < 0.03
+                and abs(v["r"] - ball["r"]) < 0.02 for v in fits]
+
+    assert all(on_it())
+    monkeypatch.setattr(fitting, "_held_search", lambda score, values, best, held, settle=():
+                        fitting._one_search(score, values, best, held, settle))
+    assert not all(on_it())
 
 
 def test_a_fitted_birth_chooses_the_class_that_fits(setting):  # noqa: F811

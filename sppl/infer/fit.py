@@ -57,6 +57,16 @@ START_STEP = 4.0
 SPREADS = (0.5, 0.05, 0.005)
 HALVINGS = 6
 MAX_EVALUATIONS = 100
+# A fit from a seed (a fitted birth's) also runs its search once more, that time first over
+# the object's other continuous parameters with its place held at the seed (at most this many
+# scores), the better fit winning. The seed is the middle of the pixels left unexplained, a
+# few centimetres from an object that small; a search from a prior draw's size (tens of
+# centimetres) moved the place in steps of 40 cm as it shrank, and no object 4 cm wide it
+# then came to was near those pixels (shapes.scn's prior scene 2: a sphere 4 cm wide, worth 56
+# nats, its seed 3 cm from it, fitted 13 cm away with nothing explained). A large object's
+# seed is tens of centimetres from its centre, where the held search fits a small one: it
+# needs the search that moves the place from the start.
+SETTLE_EVALUATIONS = 40
 # Where the search starts for the parameters the object it replaces does not have (a cube's
 # side and angle where a sphere stood): the best of this many fixed draws of the class's
 # prior. A single draw starts a small cube's fit from a side of 0.6 m, a size from which the
@@ -200,11 +210,13 @@ class _Search:
         optimize.minimize(loss, start, method="Powell",
                           options={"maxfev": evaluations, "xtol": 1e-3, "ftol": 1e-12})
 
-    def pattern(self) -> None:
-        cont = [p for p in self.cls.parameters if p.continuous]
+    def pattern(self, held=(), evaluations: int = MAX_EVALUATIONS) -> None:
+        """The pattern search over the continuous parameters not ``held``, until the search
+        has made ``evaluations`` scores in all."""
+        cont = [p for p in self.cls.parameters if p.continuous and p.name not in held]
         steps = {p.name: START_STEP * p.proposal_scale for p in cont}
         halvings = 0
-        while cont and halvings <= HALVINGS and self.evaluations < MAX_EVALUATIONS:
+        while cont and halvings <= HALVINGS and self.evaluations < evaluations:
             improved = False
             for p in cont:
                 for sign in (1.0, -1.0):
@@ -214,7 +226,7 @@ class _Search:
                     if self.trial(p.name, v):
                         improved = True
                         break
-                if self.evaluations >= MAX_EVALUATIONS:
+                if self.evaluations >= evaluations:
                     break
             if not improved:
                 steps = {n: v / 2 for n, v in steps.items()}
@@ -222,13 +234,14 @@ class _Search:
 
 
 def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None, also=(),
-        seeds: int = 0, polish: int = 0) -> dict[str, Any]:
+        seeds: int = 0, polish: int = 0, settle=()) -> dict[str, Any]:
     """The fitted values (``scored_fit``'s, without their score)."""
-    return scored_fit(sampler, state, cls, like, keep, also, seeds, polish)[0]
+    return scored_fit(sampler, state, cls, like, keep, also, seeds, polish, settle)[0]
 
 
 def scored_fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None,
-               also=(), seeds: int = 0, polish: int = 0) -> tuple[dict[str, Any], float]:
+               also=(), seeds: int = 0, polish: int = 0,
+               settle=()) -> tuple[dict[str, Any], float]:
     """The deterministic fit of a ``cls`` object into ``state``, from ``like``'s values (those
     named in ``keep``, if given) or those of the objects ``also`` (a merge's others, whose
     pixels the fit takes over): the best of the starts, each categorical parameter set to
@@ -241,15 +254,17 @@ def scored_fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=
     (its largest blobs of unexplained pixels, ``BirthProposal.seeds``), starting from the
     best of the first start's values and START_DRAWS fixed prior draws, each moved there;
     the best search wins. With ``polish``, Powell's method then takes at most that many
-    scores more (``_Search.polish``). Both keep the fit a deterministic function of its
-    arguments and the state. Returned with the fit: the log joint of the state with the
-    fitted object in it (-inf where no start had a finite one)."""
+    scores more (``_Search.polish``). With ``settle`` (names of parameters, a fitted birth's
+    place), each search runs twice, the second time first over the other continuous
+    parameters with those held (SETTLE_EVALUATIONS), the better winning. All keep the fit a
+    deterministic function of its arguments and the state. Returned with the fit: the log
+    joint of the state with the fitted object in it (-inf where no start had a finite one)."""
     score = _Scores(sampler, state, cls)
     starts = [v for o in (like, *also) for v in _starts(cls, o, keep)]
     scores = [score(v) for v in starts]
     best = max(scores)
     values = starts[scores.index(best)]
-    found = _search(score, values, best)
+    found = _search(score, values, best, settle)
     if seeds and cls.position:
         draws = [values, *_starts(cls, like, keep=())]
         for seed in sampler.birth.seeds(state)[:seeds]:
@@ -295,7 +310,7 @@ def class_log_prob(log_p: np.ndarray, c: int) -> float:
     return float(log_p[c])
 
 
-def _search(score: _Scores, values, best) -> _Search:
+def _search(score: _Scores, values, best, settle=()) -> _Search:
     """The search from ``values``; and, for each categorical parameter that shapes the
     object (``shaping``), once more from each of its other values, held there, the best
     search winning. A large sphere that a chain read as two small objects is fitted, from
@@ -303,20 +318,33 @@ def _search(score: _Scores, values, best) -> _Search:
     search moves the size before it moves the place (blocks.scn's prior scene 8: the merge
     of the two as a large sphere gains 2,616 nats, as a small one fitted loses 544)."""
     cls = score.cls
-    found = _held_search(score, values, best, ())
+    found = _held_search(score, values, best, (), settle)
     for name in shaping(cls):
         for value in cls.parameter(name).domain.values:
             if value == values[name]:
                 continue
             start = {**values, name: value}
-            other = _held_search(score, start, score(start), (name,))
+            other = _held_search(score, start, score(start), (name,), settle)
             if other.best > found.best:
                 found = other
     return found
 
 
-def _held_search(score: _Scores, values, best, held) -> _Search:
+def _held_search(score: _Scores, values, best, held, settle=()) -> _Search:
+    """The search with the categorical parameters ``held`` kept; with ``settle``, also the
+    one that first searches with those parameters held, the better winning."""
+    found = _one_search(score, values, best, held)
+    if settle:
+        other = _one_search(score, values, best, held, settle)
+        if other.best > found.best:
+            found = other
+    return found
+
+
+def _one_search(score: _Scores, values, best, held, settle=()) -> _Search:
     search = _Search(score, values, best)
+    if settle:
+        search.pattern(held=settle, evaluations=SETTLE_EVALUATIONS)
     search.categorical(held)
     search.turns()
     search.pattern()

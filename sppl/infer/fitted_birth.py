@@ -70,11 +70,12 @@ def seed_log_probs(seeds: np.ndarray, obj: SceneObject) -> np.ndarray:
 def fit_at(sampler, state: Trace, cls: ObjectClass, seed) -> tuple[dict, float]:
     """The deterministic fit of a ``cls`` object into ``state`` from the seed (the search of
     ``sppl.infer.fit`` from the seed, its other parameters from the best of fixed draws of
-    the class's prior), and the log joint of the state with it."""
+    the class's prior; and the same search with the place first held at the seed, the better
+    winning), and the log joint of the state with it."""
     start = cls.sample_prior(np.random.default_rng(0))
     start[cls.position[0]], start[cls.position[1]] = float(seed[0]), float(seed[1])
     return fitting.scored_fit(sampler, state, cls, make_object(sampler.model, cls, start),
-                              keep=cls.position)
+                              keep=cls.position, settle=cls.position)
 
 
 def class_choice(sampler, state: Trace, seed) -> tuple[list[dict], np.ndarray]:
