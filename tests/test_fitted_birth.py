@@ -48,33 +48,42 @@ def test_seeds_sit_on_the_missing_objects(setting):  # noqa: F811
     assert len(sampler.birth.seeds(full)) == 0
 
 
-def _tiny_sphere(root, tmp_path):
-    """shapes.scn's prior scene 2, less two objects: a red cube and a blue sphere 4 cm
-    across, 4 m from the example's 96x96 cameras, observed (the objects, their noise, and a
-    maker of samplers given the observations)."""
+def observed_scene(root, tmp_path, name, scene, seed):
+    """A scene of models/NAME rendered by sppl with the cameras of examples/models/NAME, as
+    benchmarks/prior_scenes.py renders its scenes: the model, the true objects and noise, and
+    the observations."""
     import json
 
     from sppl.data.observations import load_observations
     from sppl.lang import load_model
     from sppl.model.simulate import load_scene
-    from sppl.render import Renderer
     from sppl.runs.experiment import simulate
+
+    (tmp_path / "scene.json").write_text(json.dumps(scene))
+    path = root / "models" / f"{name}.scn"
+    obs_path = simulate(path, root / "examples" / "models" / name / "cameras.json",
+                        tmp_path / "scene.json", tmp_path / "obs", seed=seed)
+    model = load_model(path)
+    objects, noise = load_scene(model, obs_path / "scene.json")
+    return model, objects, noise, load_observations(obs_path)
+
+
+def _tiny_sphere(root, tmp_path):
+    """shapes.scn's prior scene 2, less two objects: a red cube and a blue sphere 4 cm
+    across, 4 m from the example's 96x96 cameras, observed (the objects, their noise, and a
+    maker of samplers given the observations)."""
+    from sppl.render import Renderer
     from sppl.scoring.scorer import Scorer
 
     scene = {"objects": [
         {"class": "cube", "params": {"x": -0.14, "y": -0.08, "a": -0.17, "s": 0.77, "c": "red"}},
         {"class": "sphere", "params": {"x": -0.128, "y": -1.022, "r": 0.02, "c": "blue"}}],
         "noise": {"image": {"sigma": 0.05}, "depth": {"sigma": 0.05}}}
-    (tmp_path / "scene.json").write_text(json.dumps(scene))
-    path = root / "models" / "shapes.scn"
-    obs_path = simulate(path, root / "examples" / "models" / "shapes" / "cameras.json",
-                        tmp_path / "scene.json", tmp_path / "obs", seed=2028)
-    model = load_model(path)
-    objects, noise = load_scene(model, obs_path / "scene.json")
+    model, objects, noise, obs = observed_scene(root, tmp_path, "shapes", scene, 2028)
 
     def sampler():
-        return Sampler(model, Scorer(model, load_observations(obs_path),
-                                     Renderer(model.render)), np.random.default_rng(0))
+        return Sampler(model, Scorer(model, obs, Renderer(model.render)),
+                       np.random.default_rng(0))
 
     return objects, noise, sampler
 

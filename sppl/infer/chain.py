@@ -31,6 +31,7 @@ from ..model.trace import (
 from ..model.types import Model
 from ..scoring.protocol import ScorerProtocol
 from . import (
+    faces,
     jumps,  # noqa: F401  (registers the built-in jumps)
     moves,
 )
@@ -320,6 +321,8 @@ class Sampler:
         for k in range(len(trace.objects)):
             for block in moves.parameter_blocks(trace.objects[k].cls):
                 trace = yield from self._parameter_step(trace, k, block)
+            for name in self._faces(trace.objects[k].cls):
+                trace = yield from self._face_step(trace, k, name)
         if rng.random() < m.inference.p_jump:
             trace = yield from self.decide(trace, self.propose_jump(trace))
         for kind, parameters in m.noise_groups:
@@ -343,6 +346,8 @@ class Sampler:
         if rng.random() < m.inference.p_jump:
             trace = yield from self.decide(trace, self.propose_jump(trace))
         for k in reversed(range(len(trace.objects))):
+            for name in reversed(self._faces(trace.objects[k].cls)):
+                trace = yield from self._face_step(trace, k, name)
             for block in reversed(moves.parameter_blocks(trace.objects[k].cls)):
                 trace = yield from self._parameter_step(trace, k, block)
         self.warmup.sweep += 1
@@ -355,6 +360,21 @@ class Sampler:
         new = yield from self.decide(trace, proposal)
         if trace.objects[k].cls.parameter(block[0]).continuous:
             self.warmup.record(site, new is not trace)
+        return new
+
+    def _faces(self, cls) -> tuple[str, ...]:
+        """The face moves of an object of ``cls`` in a sweep, in order: each of its face
+        parameters ``face_steps`` times (none by default)."""
+        return faces.face_parameters(cls) * self.model.inference.face_steps
+
+    def _face_step(self, trace: Trace, k: int, name: str):
+        site = f"{trace.objects[k].cls.name}/face {name}"
+        proposal = faces.propose_face(self.model, trace, k, name, self.rng,
+                                      self.warmup.factor(site))
+        if proposal is None:  # no reach, whatever the step: nothing to decide
+            return trace
+        new = yield from self.decide(trace, proposal)
+        self.warmup.record(site, new is not trace)
         return new
 
     def _noise_step(self, trace: Trace, kind: str, name: str):

@@ -31,7 +31,7 @@ from .birth import BirthProposal
 
 @dataclass(frozen=True, eq=False)
 class Proposal:
-    move: str  # "parameters", "noise", "render", or a registered jump (sppl.model.jumps)
+    move: str  # "parameters", "face", "noise", "render", or a registered jump (sppl.model.jumps)
     label: str  # class name, or sensor kind for noise moves: acceptance is counted per label
     objects: tuple[SceneObject, ...]
     noise: Mapping[str, Mapping[str, float]]
@@ -265,7 +265,7 @@ def reverse(
     old place, a change's the change back (carrying the same parameters and proposing exactly
     the dropped ones), a replace's the replacement of the new object by the old one through
     the same scene without either (which ``without`` renders, as in ``propose_replace``), a
-    parameter or noise move's the step back. The log acceptance ratio of the reverse is minus
+    parameter or noise move's the step back, a face move's the same reach stepped back. The log acceptance ratio of the reverse is minus
     that of the move, and applying both gives back ``before``: the debug check
     ``sppl.verify.check_reverse`` does exactly that. A move type this does not know raises
     ``ValueError``, which the check reports as a failure.
@@ -309,6 +309,8 @@ def reverse(
         return Proposal(proposal.move, new.cls.name, objects, after.noise, (old,), ratio)
     if proposal.move in ("noise", "render"):
         return Proposal(proposal.move, proposal.label, after.objects, before.noise, ())
+    if proposal.move == "face":  # the same reach, the step back (sppl.infer.faces)
+        return proposal.tries.undo(model, after, before)
     raise ValueError(f"no reverse for a {proposal.move!r} proposal")
 
 

@@ -7,10 +7,10 @@ the target while they act, so they act only during the first sweeps, which are a
 -Hastings kernel of the posterior, and every check of ``sppl verify`` applies to it.
 
 - **Adaptation** (``adapt = N`` in the model's inference settings): during the first N sweeps,
-  each random-walk move site (a class's block of continuous parameters, a noise parameter)
-  scales its declared step by a factor that a Robbins-Monro recursion drives towards the
-  acceptance rate ``TARGET`` (log factor += (accepted - TARGET) / sqrt(n)). The factors
-  freeze at sweep N.
+  each random-walk move site (a class's block of continuous parameters, a face parameter's
+  face moves, a noise parameter) scales its declared step by a factor that a Robbins-Monro
+  recursion drives towards the acceptance rate ``TARGET`` (log factor += (accepted - TARGET) /
+  sqrt(n)). The factors freeze at sweep N.
 - **Annealing** (``anneal = N``): during the first N sweeps the acceptance ratios use the
   likelihood raised to a power beta that rises geometrically from ``anneal_from`` to 1, so the
   early chain moves between hypotheses that the data will later separate sharply.

@@ -238,6 +238,9 @@ class InferenceSettings:
     # Powell's method after it (0: the refit's search alone).
     merge_seeds: int = 0
     merge_polish: int = 0
+    # Face moves per face parameter of each object in a sweep (sppl/infer/faces.py: a size
+    # stepped with the place so that one side stays put); 0: none.
+    face_steps: int = 0
     # Relative weights of the model jumps, by default each registered jump's own
     # (sppl.model.jumps). The thesis has birth, death and change, equally weighted; replace
     # (sppl.infer.moves.propose_replace) is sppl's addition. refit (sppl.infer.fit), merge and

@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..infer import jumps, moves
+from ..infer import faces, jumps, moves
 from ..infer.chain import Sampler
 from ..model.simulate import sample_noise, sample_objects
 from ..model.trace import Trace
@@ -81,7 +81,8 @@ def move_checks(
     type with a positive probability (``Sampler.jump``) has been proposed once from the state,
     so a new kind of jump is checked without naming it here (and fails where it is not
     registered with a reverse, ``sppl.model.jumps``). Then a parameter move of each block of one
-    object, and a move of each noise parameter. With sensors (and ``observe``), the states are
+    object (and, where the model asks for face moves, a face move of each of its face
+    parameters), and a move of each noise parameter. With sensors (and ``observe``), the states are
     scored against observations of another prior scene, so that data-driven births (which
     look at what a state leaves unexplained) are among those checked; without, against no
     observations. The change-of-class pairings are checked too (``change_declarations``).
@@ -116,6 +117,11 @@ def move_checks(
             k = int(rng.integers(len(trace.objects)))
             for block in moves.parameter_blocks(trace.objects[k].cls):
                 proposals.append(moves.propose_parameters(model, trace, k, block, rng))
+            if model.inference.face_steps:
+                for name in faces.face_parameters(trace.objects[k].cls):
+                    face = faces.propose_face(model, trace, k, name, rng)
+                    if face is not None:  # a parameter with no reach has no face move
+                        proposals.append(face)
         for kind, parameters in model.noise_groups:
             for p in parameters:
                 proposals.append(moves.propose_noise(model, trace, kind, p.name, rng))
