@@ -15,7 +15,7 @@ of object k and moves its place so that one corner of each of its parts' boxes s
 with delta ~ N(0, (s f)^2) (s the parameter's declared step, f the warm-up's factor) and u
 uniform among the object's reaches R(p): the distinct horizontal displacements of its parts'
 posed bounding-box corners per unit of p (a box's width: half its width axis, either way; a
-cube's side or a radius: the four half-diagonals). R is measured at two fixed values of p
+cube's side or a radius: one towards each corner of the object's box). R is measured at two fixed values of p
 (``REFERENCE``) and a fixed place, so it depends on the object's other parameters alone, and
 the move does not change those. So its reverse is the same u with -delta: the map (p, x, y)
 -> (p', x', y') is a shear of Jacobian 1, both directions draw u with probability 1 / |R| and
