@@ -190,6 +190,10 @@ def cells(page: str) -> dict[str, list[str]]:
 def test_acceptance_per_move_type_and_per_class():
     table = _acceptance_table({"acceptance_by_class": MOVES})
     assert list(table) == ["birth", "death", "parameters", "noise"]
+    more = {**MOVES, "refit/cube": {"proposed": 1, "accepted": 0},
+            "face/cube": {"proposed": 8, "accepted": 2}}
+    assert list(_acceptance_table({"acceptance_by_class": more})) == [
+        "birth", "death", "parameters", "face", "noise", "refit"]
     assert table["birth"] == {"sphere": (4, 1), "cube": (10, 3), "all": (14, 4)}
     assert table["noise"] == {"image": (20, 5), "all": (20, 5)}
     page = acceptance_html({"acceptance_by_class": MOVES})

@@ -516,7 +516,9 @@ def _acceptance_table(summary: dict[str, Any]) -> dict[str, dict[str, tuple[int,
         row[label or "-"] = (c["proposed"], c["accepted"])
         n, a = row.get("all", (0, 0))
         row["all"] = (n + c["proposed"], a + c["accepted"])
-    order = ["birth", "death", "change", "parameters", "noise", "render"]
+    # Face moves beside the random walk whose steps they complement; moves not named here
+    # (the fitted jumps) after these, by name.
+    order = ["birth", "death", "change", "parameters", "face", "noise", "render"]
     return dict(sorted(table.items(), key=lambda kv: (order.index(kv[0]) if kv[0] in order else 99,
                                                        kv[0])))
 
