@@ -234,9 +234,9 @@ class _Search:
 
 
 def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None, also=(),
-        seeds: int = 0, polish: int = 0, settle=()) -> dict[str, Any]:
+        seeds: int = 0, polish: int = 0) -> dict[str, Any]:
     """The fitted values (``scored_fit``'s, without their score)."""
-    return scored_fit(sampler, state, cls, like, keep, also, seeds, polish, settle)[0]
+    return scored_fit(sampler, state, cls, like, keep, also, seeds, polish)[0]
 
 
 def scored_fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None,
