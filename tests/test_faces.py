@@ -192,27 +192,3 @@ def test_a_box_held_too_long_is_shortened_from_its_wrong_end(require_gl, root, t
             assert abs(length - true_box["w"]) < 0.015 and off < 0.01, box
         else:
             assert length - true_box["w"] > 0.03 and off > 0.015, box
-
-
-def test_a_fit_reaches_a_box_held_too_long_by_face_steps(require_gl, root, tmp_path,
-                                                         monkeypatch):
-    """A fit ends with face steps (``fit._Search.step_faces``): fitted from the box held
-    5.5 cm too long, into the scene without it, the box comes within 1.5 cm of its true
-    length and 1 cm of its true centre; with no scores left for face steps it stays more
-    than 3 cm too long, as a refit did before them."""
-    from sppl.infer import fit
-
-    make_sampler, truth, noise, held = _long_box(root, tmp_path)
-    true_box = truth[2].values
-    for with_steps in (True, False):
-        if not with_steps:
-            monkeypatch.setattr(fit, "FACE_EVALUATIONS", 0)
-        sampler = make_sampler(0)
-        state = sampler.make_trace(truth[:2], noise)
-        box = fit.fit(sampler, state, held[2].cls, held[2])
-        length = box["d"] if abs(math.cos(box["a"] - true_box["a"])) < 0.5 else box["w"]
-        off = math.hypot(box["x"] - true_box["x"], box["y"] - true_box["y"])
-        if with_steps:
-            assert abs(length - true_box["w"]) < 0.015 and off < 0.01, box
-        else:
-            assert length - true_box["w"] > 0.03, box

@@ -6,11 +6,9 @@ random walk of its parameters: shortened with its centre kept, the box uncovers 
 near end, which the cameras see; moved alone, it uncovers that end too. Each change alone is
 worse, and the joint step of all six parameters rarely lines up with the one direction that
 is better: shortened by 5 cm with its near end kept, tabletop.scn's prior scene 6 gains 524
-nats, with no dip deeper than 2 nats on the way (benchmarks/README.md). A fit's search that
-moved one parameter at a time stopped there too; it now makes face steps as well
-(``fit._Search.face``), the deterministic twin of this move. The face move steps a size
-parameter p of object k and moves its place so that one corner of each of its parts' boxes
-stays put:
+nats, with no dip deeper than 2 nats on the way (benchmarks/README.md). A refit's search
+moves one parameter at a time and stops there too. The face move steps a size parameter p
+of object k and moves its place so that one corner of each of its parts' boxes stays put:
 
     p' = p + delta,   (x', y') = (x, y) - delta u,
 
