@@ -192,24 +192,3 @@ def test_a_box_held_too_long_is_shortened_from_its_wrong_end(require_gl, root, t
             assert abs(length - true_box["w"]) < 0.015 and off < 0.01, box
         else:
             assert length - true_box["w"] > 0.03 and off > 0.015, box
-
-
-def test_a_merges_fit_reaches_a_box_held_too_long_by_face_steps(require_gl, root, tmp_path):
-    """A merge's fit ends with face steps (``merge_faces``, ``fit._Search.step_faces``):
-    fitted from the box held 5.5 cm too long, into the scene without it, the box comes within
-    1.5 cm of its true length and 1 cm of its true centre; without them it stays more than
-    3 cm too long, as a refit's fit does."""
-    from sppl.infer import fit
-
-    make_sampler, truth, noise, held = _long_box(root, tmp_path)
-    true_box = truth[2].values
-    for evaluations in (40, 0):
-        sampler = make_sampler(0)
-        state = sampler.make_trace(truth[:2], noise)
-        box, _ = fit.scored_fit(sampler, state, held[2].cls, held[2], faces=evaluations)
-        length = box["d"] if abs(math.cos(box["a"] - true_box["a"])) < 0.5 else box["w"]
-        off = math.hypot(box["x"] - true_box["x"], box["y"] - true_box["y"])
-        if evaluations:
-            assert abs(length - true_box["w"]) < 0.015 and off < 0.01, box
-        else:
-            assert length - true_box["w"] > 0.03, box

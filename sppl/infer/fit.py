@@ -43,7 +43,7 @@ from scipy import optimize
 from ..model.domains import Finite, Periodic
 from ..model.trace import SceneObject, Trace, make_object
 from ..model.types import ObjectClass
-from . import faces, misfit
+from . import misfit
 from .moves import Proposal
 
 # Chance that a categorical parameter is not the fitted value (then uniform among the rest).
@@ -67,11 +67,6 @@ MAX_EVALUATIONS = 100
 # seed is tens of centimetres from its centre, where the held search fits a small one: it
 # needs the search that moves the place from the start.
 SETTLE_EVALUATIONS = 40
-# A merge's face steps (``_Search.step_faces``, the model's ``merge_faces``): from where its
-# search stopped, of the search's first FACE_HALVINGS + 1 step lengths (4 and 2 random-walk
-# steps: a box 8 or 4 cm longer or shorter). A fit makes about 100 scores; where no face step
-# improves it, a box's or a sphere's costs 16 more.
-FACE_HALVINGS = 1
 # Where the search starts for the parameters the object it replaces does not have (a cube's
 # side and angle where a sphere stood): the best of this many fixed draws of the class's
 # prior. A single draw starts a small cube's fit from a side of 0.6 m, a size from which the
@@ -165,30 +160,6 @@ class _Search:
             return True
         return False
 
-    def face(self, name: str, step: float, evaluations: int) -> bool:
-        """Steps of size ``name`` by ``step`` each way with the place moved so that one side
-        stays put (``faces.reaches``, measured at the values found so far), one reach after
-        another, until one improves the fit or the search has made ``evaluations`` scores.
-        A box fitted short along its length gains nothing from its length or its centre
-        alone, each of which uncovers one end; the two together, as a face step moves them,
-        do (tabletop.scn's prior scene 24: a box merged from two pieces, fitted 1,185 nats
-        below the state the merge left without face steps, 122 above with them)."""
-        x, y = self.cls.position
-        for reach in faces.reaches(self.cls, self.values, name):
-            for sign in (1.0, -1.0):
-                delta = sign * step
-                trial = {**self.values, name: self.values[name] + delta,
-                         x: self.values[x] - delta * float(reach[0]),
-                         y: self.values[y] - delta * float(reach[1])}
-                if self.evaluations >= evaluations:
-                    return False
-                s = self.score(trial)
-                self.evaluations += 1
-                if s > self.best:
-                    self.values, self.best = trial, s
-                    return True
-        return False
-
     def categorical(self, held=()) -> None:
         for p in self.cls.parameters:
             if isinstance(p.domain, Finite) and p.name not in held:
@@ -241,39 +212,15 @@ class _Search:
 
     def pattern(self, held=(), evaluations: int = MAX_EVALUATIONS) -> None:
         """The pattern search over the continuous parameters not ``held``, until the search
-        has made ``evaluations`` scores in all (``_axes``)."""
+        has made ``evaluations`` scores in all."""
         cont = [p for p in self.cls.parameters if p.continuous and p.name not in held]
-        self._axes(cont, 0, evaluations)
-
-    def step_faces(self, evaluations: int) -> None:
-        """Face steps from where the search stopped (``_escape``), and the search again from
-        each that improves the fit, face steps first, with at most ``evaluations`` scores
-        more."""
-        sizes = faces.face_parameters(self.cls)
-        if not sizes:
-            return
-        cont = [p for p in self.cls.parameters if p.continuous]
-        limit = self.evaluations + evaluations
-        while (halvings := self._escape(sizes, limit)) is not None:
-            self._axes(cont, halvings, limit, sizes)
-
-    def _axes(self, cont, halvings: int, evaluations: int, sizes=()) -> None:
-        """A face step each way per size in ``sizes``, START_STEP random-walk steps long
-        halved ``halvings`` times, until one improves; where none does, a step of that length
-        each way per parameter of ``cont``; halved again when nothing improves, until
-        HALVINGS halvings or ``evaluations`` scores in all. (The face steps come first: from
-        where the axes stopped, the step of one parameter that would improve is rare.)"""
-        while halvings <= HALVINGS and self.evaluations < evaluations:
-            scale = START_STEP * 2.0**-halvings
+        steps = {p.name: START_STEP * p.proposal_scale for p in cont}
+        halvings = 0
+        while cont and halvings <= HALVINGS and self.evaluations < evaluations:
             improved = False
-            for name in sizes:
-                step = scale * self.cls.parameter(name).proposal_scale
-                if self.face(name, step, evaluations):
-                    improved = True
-                    break
-            for p in cont if not improved else ():
+            for p in cont:
                 for sign in (1.0, -1.0):
-                    v = self.values[p.name] + sign * scale * p.proposal_scale
+                    v = self.values[p.name] + sign * steps[p.name]
                     if isinstance(p.domain, Periodic):
                         v = p.domain.wrap(v)
                     if self.trial(p.name, v):
@@ -282,24 +229,8 @@ class _Search:
                 if self.evaluations >= evaluations:
                     break
             if not improved:
+                steps = {n: v / 2 for n, v in steps.items()}
                 halvings += 1
-
-    def _escape(self, sizes, evaluations: int) -> int | None:
-        """Face steps from where the search stopped, of each size in ``sizes`` at each of the
-        search's step lengths, longest first, until one improves the fit or the search has
-        made ``evaluations`` scores: the halvings of that step's length (None where none
-        improves). They come only once the steps of one parameter at a time have stopped, so
-        that the search follows the path it took without them and ends no worse; taken at
-        every stall instead, they led a sphere 4 cm across, fitted at its seed, to one 6 cm
-        across a centimetre off (46 nats against 57)."""
-        for halvings in range(FACE_HALVINGS + 1):
-            for name in sizes:
-                if self.evaluations >= evaluations:
-                    return None
-                step = START_STEP * 2.0**-halvings * self.cls.parameter(name).proposal_scale
-                if self.face(name, step, evaluations):
-                    return halvings
-        return None
 
 
 def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None, also=(),
@@ -309,8 +240,8 @@ def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None, a
 
 
 def scored_fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None,
-               also=(), seeds: int = 0, polish: int = 0, settle=(),
-               faces: int = 0) -> tuple[dict[str, Any], float]:
+               also=(), seeds: int = 0, polish: int = 0,
+               settle=()) -> tuple[dict[str, Any], float]:
     """The deterministic fit of a ``cls`` object into ``state``, from ``like``'s values (those
     named in ``keep``, if given) or those of the objects ``also`` (a merge's others, whose
     pixels the fit takes over): the best of the starts, each categorical parameter set to
@@ -322,10 +253,9 @@ def scored_fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=
     With ``seeds``, the same search also runs from each of that many of the state's seeds
     (its largest blobs of unexplained pixels, ``BirthProposal.seeds``), starting from the
     best of the first start's values and START_DRAWS fixed prior draws, each moved there;
-    the best search wins. With ``faces``, it ends with face steps, at most that many scores
-    more (``_Search.step_faces``; a merge's: the model's ``merge_faces``). With ``polish``,
-    Powell's method then takes at most that many scores more (``_Search.polish``). With
-    ``settle`` (names of parameters, a fitted birth's place), each search runs twice, the second time first over the other continuous
+    the best search wins. With ``polish``, Powell's method then takes at most that many
+    scores more (``_Search.polish``). With ``settle`` (names of parameters, a fitted birth's
+    place), each search runs twice, the second time first over the other continuous
     parameters with those held (SETTLE_EVALUATIONS), the better winning. All keep the fit a
     deterministic function of its arguments and the state. Returned with the fit: the log
     joint of the state with the fitted object in it (-inf where no start had a finite one)."""
@@ -345,8 +275,6 @@ def scored_fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=
             other = _search(score, moved[scores.index(best)], best)
             if other.best > found.best:
                 found = other
-    if faces:
-        found.step_faces(faces)
     if polish:
         found.polish(polish)
     return found.values, found.best

@@ -177,8 +177,7 @@ def merge_search(sampler) -> dict[str, int]:
     merge, and in the split's reverse) searches further; the split's fit of its object from
     the one it splits, which only shrinks it, is the refit's."""
     settings = sampler.model.inference
-    return {"seeds": settings.merge_seeds, "polish": settings.merge_polish,
-            "faces": settings.merge_faces}
+    return {"seeds": settings.merge_seeds, "polish": settings.merge_polish}
 
 
 def _refitted(sampler, state: Trace, like: SceneObject, rng: np.random.Generator,

@@ -238,9 +238,6 @@ class InferenceSettings:
     # Powell's method after it (0: the refit's search alone).
     merge_seeds: int = 0
     merge_polish: int = 0
-    # A merge's fit ends with face steps, at most this many scores (sppl/infer/fit.py,
-    # ``_Search.step_faces``); 0: none.
-    merge_faces: int = 0
     # Face moves per face parameter of each object in a sweep (sppl/infer/faces.py: a size
     # stepped with the place so that one side stays put); 0: none.
     face_steps: int = 0
