@@ -271,6 +271,8 @@ def solve(model, obs, right, seed, steps, limit, check_every, full=False,
     final = result.summary["map"]["objects"]
     state["final"], state["final_note"] = right.errors(final), right.note(final)
     state["final_right"] = right(final)
+    if state["errors"] is None:  # the time ran out before the first check: report the MAP
+        state["errors"], state["note"] = state["final"], state["final_note"]
     state["map"] = result.summary["map"]
     state["noise"] = result.summary["noise"]  # posterior means and sds after burn-in
     return state
@@ -317,6 +319,8 @@ def _run_chain_of(model_path, obs, right, index, seed, steps, limit, check_every
         with tempfile.TemporaryDirectory() as tmp:
             result = run_chain(model, obs, Path(tmp), steps=steps, seed=seed, progress=False,
                                callback=check)
+        if state["errors"] is None:  # the time ran out before the first check
+            state["errors"] = right.errors(result.summary["map"]["objects"])
         results.put((index, {"seconds": state["seconds"], "errors": state["errors"],
                              "steps_run": result.summary["steps_done"],
                              "map": result.summary["map"],

@@ -118,6 +118,21 @@ def test_prior_scenes_runs_several_chains_and_reports_the_best_of_their_maps(roo
     assert run_leader([-60.0, -50.0], [0, 1]) == 1
 
 
+@pytest.mark.parametrize("chains", [1, 2])
+def test_prior_scenes_reports_a_scene_whose_time_ran_out_before_its_first_check(
+        root, require_gl, tmp_path, chains):
+    """A chain whose CPU seconds run out before its first MAP check (a slow machine, a short
+    --limit) still gives its row: unsolved, with the errors of the MAP it had."""
+    import json
+
+    run = tmp_path / "run.json"
+    bench(root, "prior_scenes.py", "--models", "shapes", "--scenes", "1", "--limit", "0",
+          "--check-every", "1000", "--chains", chains, "--json", run)
+    (row,) = json.loads(run.read_text())
+    assert not row["solved"] and row["seconds"] is None and row["steps"] >= 1
+    assert row["map_objects"] >= 0 and row["wrong_class"] >= 0
+
+
 def test_observed_check_asks_only_what_the_observations_tell(root):
     """ObservedCheck: a droppable true object may be missing but, when an estimated object
     stands for it, must be of its class; a free value may differ, any other may not; an
