@@ -219,3 +219,50 @@ def test_a_speck_apart_from_the_drawn_edges_is_kept_and_one_along_them_is_not():
     blob[16:22, 16:22] = (0.1, 0.2, 0.8)
     assert not specks(blob).any() and birth._blobs(
         np.abs(blob - rendered).mean(axis=-1) > birth.COLOUR_GAP).sum() == 16
+
+
+def test_a_depth_speck_apart_from_the_drawn_outlines_is_kept_and_a_rim_is_not():
+    """A floor 5 m away with a square drawn 3 m away: a column of depth pixels one wide and
+    metres nearer, apart from the square, is a speck, whole; so is a pole beside the square
+    that touches its outline at a few of its pixels; the square's rim drawn a pixel off is
+    not, nor a column only a little nearer (within the noise's reach), nor three stray
+    returns at random depths; three side by side that agree are; a blob keeps only what the
+    erosion leaves of it; and a piece whose eroded pixels are too few to seed is a speck."""
+    from sppl.infer import birth
+
+    rendered = np.full((24, 24), 5.0)
+    rendered[8:14, 8:14] = 3.0
+    square = np.zeros((24, 24), dtype=bool)
+    square[8:14, 8:14] = True
+
+    def specks(observed):
+        flagged = observed < rendered - 0.05
+        return birth._depth_specks(flagged, birth._blobs(flagged), observed < rendered - 0.1,
+                                   observed, birth._depth_edges(rendered, 0.05) | square)
+
+    column = rendered.copy()
+    column[16:22, 3] = np.linspace(2.0, 2.2, 6)
+    assert np.argwhere(specks(column)).tolist() == [[r, 3] for r in range(16, 22)]
+    pole = rendered.copy()
+    pole[:, 15] = 4.0
+    assert specks(pole)[:, 15].all() and specks(pole).sum() == 24
+    rim = rendered.copy()
+    rim[8:14, 14] = 3.0
+    assert not specks(rim).any()
+    faint = rendered.copy()
+    faint[16:22, 3] = 4.93
+    assert not specks(faint).any()
+    strays = rendered.copy()
+    strays[20, 18:21] = (0.3, 4.1, 2.2)
+    assert not specks(strays).any()
+    agreeing = rendered.copy()
+    agreeing[20, 18:21] = (2.2, 2.3, 2.25)
+    assert specks(agreeing).sum() == 3
+    blob = rendered.copy()
+    blob[16:22, 16:22] = 2.0
+    assert not specks(blob).any()
+    # Two squares of 3 by 3 joined by a pixel: the erosion leaves their two middles, apart,
+    # neither of which seeds, so the piece is a speck.
+    beads = rendered.copy()
+    beads[17:20, 1:4] = beads[17:20, 5:8] = beads[18, 4] = 2.0
+    assert specks(beads).sum() == 19

@@ -92,7 +92,8 @@ def observed_chain(tries: int, sweeps: int = 60, seed: int = 1):
 # when a fitted birth chose its class by the fits (sppl/infer/fitted_birth.py), and all four
 # when a merged object did (sppl/infer/merge.py), and again when a refitted one did
 # (sppl/infer/fit.py); and observed3 when a fitted birth's fit also searched with the place
-# held at its seed (sppl/infer/fit.py).
+# held at its seed (sppl/infer/fit.py); and the two observed chains when depth specks seeded
+# and fits at a speck's seed shrank their starts (sppl/infer/birth.py, sppl/infer/fit.py).
 RECORDED = Path(__file__).parent / "fixtures" / "jump_chains.json"
 CHAINS = {"prior1": lambda: prior_chain(1), "prior3": lambda: prior_chain(3),
           "observed1": lambda: observed_chain(1), "observed3": lambda: observed_chain(3)}

@@ -47,6 +47,18 @@ COLOUR_GAP = 0.1
 # in ten million pixels).
 STRONG_COLOUR_GAP = 0.2
 STRONG_SIGMAS = 4.0
+# The same holds in a depth map: a cone 4 cm wide far across a floor seen at a slant is a
+# column of depth pixels one or two wide, metres nearer than the floor behind, which the
+# erosion removes whole. A piece of unexplained depth pixels seeds when at least
+# DEPTH_SPECK_PIXELS of its pixels are strongly off (nearer than the render by STRONG_SIGMAS
+# times the map's noise, and at least twice DEPTH_GAP) and measure depths within
+# DEPTH_SPECK_SPAN of their median, and most of it lies away from what the state draws. A
+# sensor's stray returns are strongly off too, but at depths drawn at random (a map with 1%
+# of them holds two side by side about twice, three that agree almost never); a rim of a
+# drawn object placed a pixel off, or a scenery edge whose depth a camera mixed across it,
+# lies along that edge.
+DEPTH_SPECK_PIXELS = 3
+DEPTH_SPECK_SPAN = 0.5
 # At most this many points describe a state (an even stride over the unexplained pixels), so
 # that the density costs microseconds.
 MAX_POINTS = 400
@@ -69,9 +81,11 @@ class BirthProposal:
         # Per depth term: the gap that counts as unexplained. Twice the noise keeps noisy
         # maps (5 cm) from seeding at every pixel the noise pushes forward; a function of
         # the observations alone, so the proposal stays a function of the state.
-        self.depth_gaps = {t.frame: max(DEPTH_GAP, 2.0 * depth_noise(t.observed, t.valid,
-                                                                      t.camera.depth_max))
-                           for t in self.terms if t.kind == "depth"}
+        noise = {t.frame: depth_noise(t.observed, t.valid, t.camera.depth_max)
+                 for t in self.terms if t.kind == "depth"}
+        self.depth_gaps = {f: max(DEPTH_GAP, 2.0 * s) for f, s in noise.items()}
+        self.strong_depth_gaps = {f: max(2.0 * DEPTH_GAP, STRONG_SIGMAS * s)
+                                  for f, s in noise.items()}
         self._static_depth = None
         self.strong_gaps = {t.frame: max(STRONG_COLOUR_GAP,
                                          STRONG_SIGMAS * image_noise(t.observed))
@@ -114,14 +128,19 @@ class BirthProposal:
             dirs, ray_to_z, centre = self.rays[t.frame]
             rendered = self.scorer.rendered(renders, t)
             if t.kind == "depth":
-                near = t.observed < rendered - self.depth_gaps[t.frame]
-                near &= _measured(t.observed, t.valid, t.camera.depth_max)
-                near = _blobs(near)
+                flagged = t.observed < rendered - self.depth_gaps[t.frame]
+                flagged &= _measured(t.observed, t.valid, t.camera.depth_max)
+                blobs = _blobs(flagged)
+                strong = _depth_specks(
+                    flagged, blobs, t.observed < rendered - self.strong_depth_gaps[t.frame],
+                    t.observed, _depth_edges(rendered, self.depth_gaps[t.frame])
+                    | self._drawn(renders, t.frame))
+                near = blobs | strong
                 dist = t.observed[near]
                 if t.camera.depth_type == "z":
                     dist = dist / ray_to_z[near]
                 pts = centre + dirs[near] * dist[:, None]
-                strong = np.zeros(len(pts), dtype=bool)
+                strong = strong[near]
             elif t.kind == "image":
                 off = np.abs(t.observed - rendered).mean(axis=-1)
                 blobs = _blobs(off > COLOUR_GAP)
@@ -146,10 +165,25 @@ class BirthProposal:
         all cameras, largest first.
         A deterministic function of the state's renders, as a fitted birth's density needs
         (sppl.infer.fitted_birth)."""
-        return _cached(trace, "birth_seeds", self._seeds)
+        return self._seed_table(trace)[0]
 
-    def _seeds(self, renders) -> np.ndarray:
-        found = []  # (pixels, order found, point)
+    def speck_seeds(self, trace) -> np.ndarray:
+        """Which of ``seeds(trace)`` come from specks (RGB or depth): pieces too small for a
+        blob, apart from what the state draws, where an object a few pixels across stands
+        and not a misplaced object's rim (a fitted birth there may shrink its starts:
+        ``sppl.infer.fit.SHRINK``)."""
+        return self._seed_table(trace)[1]
+
+    def _seed_table(self, trace) -> tuple[np.ndarray, np.ndarray]:
+        if trace.renders is None:
+            return np.empty((0, 2)), np.zeros(0, dtype=bool)
+        cached = trace.cache.get("birth_seeds")
+        if cached is None:
+            cached = trace.cache["birth_seeds"] = self._seeds(trace.renders)
+        return cached
+
+    def _seeds(self, renders) -> tuple[np.ndarray, np.ndarray]:
+        found = []  # (pixels, order found, point, a speck)
         for mask, pts, strong in self._unexplained(renders):
             labels, count = ndimage.label(mask, structure=_CROSS)
             of_pixel = labels[mask]
@@ -157,9 +191,11 @@ class BirthProposal:
                 here = of_pixel == blob
                 mine = pts[here]
                 if len(mine) >= SEED_PIXELS or strong[here].any():
-                    found.append((len(mine), len(found), np.median(mine, axis=0)))
+                    found.append((len(mine), len(found), np.median(mine, axis=0),
+                                  bool(strong[here].all())))
         found.sort(key=lambda f: (-f[0], f[1]))
-        return np.array([f[2] for f in found[:MAX_SEEDS]]).reshape(-1, 2)
+        return (np.array([f[2] for f in found[:MAX_SEEDS]]).reshape(-1, 2),
+                np.array([f[3] for f in found[:MAX_SEEDS]], dtype=bool))
 
     # -- sampling and density ------------------------------------------------------------------
 
@@ -271,6 +307,56 @@ def _specks(flagged: np.ndarray, blobs: np.ndarray, strong: np.ndarray,
     keep[np.unique(labels[drawn])] = False
     keep[0] = False
     return keep[labels]
+
+
+def _depth_specks(flagged: np.ndarray, blobs: np.ndarray, strong: np.ndarray,
+                  observed: np.ndarray, drawn: np.ndarray) -> np.ndarray:
+    """``_specks`` for a depth map: the pieces of ``flagged`` (4-connected) with at least
+    DEPTH_SPECK_PIXELS ``strong`` pixels whose ``observed`` depths lie within
+    DEPTH_SPECK_SPAN of their median, and no piece of ``blobs`` that seeds (SEED_PIXELS), whole,
+    with fewer than half their pixels within two of ``drawn`` (the objects the state draws
+    and the render's depth edges). Unlike an RGB speck, one may touch a drawn object: a pole
+    standing beside a cube, metres nearer than the floor behind both, meets the cube's
+    outline at a few of its pixels, where a misplaced rim runs the outline's length."""
+    labels, count = ndimage.label(flagged, structure=_CROSS)
+    if not count:
+        return np.zeros_like(flagged)
+    marked = np.where(strong & flagged, labels, 0)
+    ids = np.unique(marked[marked > 0])
+    if not len(ids):
+        return np.zeros_like(flagged)
+    median = np.zeros(count + 1)
+    median[ids] = ndimage.median(observed, marked, ids)
+    agree = (marked > 0) & (np.abs(observed - median[marked]) <= DEPTH_SPECK_SPAN)
+    size = np.bincount(labels.ravel(), minlength=count + 1)
+    by_edges = np.bincount(
+        labels[ndimage.binary_dilation(drawn, structure=_CROSS, iterations=2)],
+        minlength=count + 1)
+    keep = np.bincount(marked[agree], minlength=count + 1) >= DEPTH_SPECK_PIXELS
+    # The erosion may leave a piece 2 pixels wide a few pixels apart from each other, none
+    # of which seeds: the piece is a speck unless one of them is a blob that seeds itself.
+    pieces, _ = ndimage.label(blobs, structure=_CROSS)
+    sizes = np.bincount(pieces.ravel())
+    sizes[0] = 0
+    largest = np.zeros(count + 1)
+    largest[1:] = ndimage.maximum(sizes[pieces], labels, np.arange(1, count + 1))
+    keep &= largest < SEED_PIXELS
+    keep &= 2 * by_edges < size
+    keep[0] = False
+    return keep[labels]
+
+
+def _depth_edges(rendered: np.ndarray, gap: float) -> np.ndarray:
+    """The pixels of a rendered depth map (H, W) where the depth jumps by more than ``gap``
+    to a neighbour: the outlines of the objects and scenery it draws."""
+    step = np.zeros(rendered.shape, dtype=bool)
+    across = np.abs(np.diff(rendered, axis=1)) > gap
+    down = np.abs(np.diff(rendered, axis=0)) > gap
+    step[:, 1:] |= across
+    step[:, :-1] |= across
+    step[1:] |= down
+    step[:-1] |= down
+    return step
 
 
 def _edges(rendered: np.ndarray) -> np.ndarray:

@@ -76,6 +76,12 @@ START_DRAWS = 16
 # steps does not leave: before it, each periodic parameter is tried at this many turns evenly
 # spread over its period.
 TURNS = 8
+# A fit from a speck's seed whose every start has zero prior also starts from them with their
+# sizes scaled so: a pole 4 cm thick beside a cube, fitted from draws of the cylinder's prior,
+# none thinner than 20 cm, overlaps the cube from every start. Only there: at a blob's seed,
+# which may be a misplaced object's rim, a shrunk start fits a sliver into the rim that the
+# chain then holds (every start of such a fit overlapping the object keeps it out).
+SHRINK = (0.5, 0.25, 0.125, 0.0625)
 # A fitted birth's class, a merged object's and a refitted one's, is the class whose fit
 # explains the pixels best, but for this share of the moves, whose class is uniform. With the
 # class uniform, the first object a chain fitted to a large cone was as often a cube, a
@@ -116,6 +122,14 @@ def _starts(cls: ObjectClass, like: SceneObject, keep=None) -> list[dict[str, An
         values.update({n: like.values[n] for n in shared})
         starts.append(values)
     return starts
+
+
+def _shrunk(cls: ObjectClass, values) -> list[dict[str, Any]]:
+    """``values`` with its sizes (the continuous parameters other than its place and angles)
+    scaled by each of SHRINK."""
+    sizes = [p.name for p in cls.parameters if p.continuous and not isinstance(p.domain, Periodic)
+             and p.name not in (cls.position or ())]
+    return [{**values, **{n: values[n] * f for n in sizes}} for f in SHRINK]
 
 
 def _score(sampler, state: Trace, cls: ObjectClass, values) -> float:
@@ -241,7 +255,7 @@ def fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None, a
 
 def scored_fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=None,
                also=(), seeds: int = 0, polish: int = 0,
-               settle=()) -> tuple[dict[str, Any], float]:
+               settle=(), shrink: bool = False) -> tuple[dict[str, Any], float]:
     """The deterministic fit of a ``cls`` object into ``state``, from ``like``'s values (those
     named in ``keep``, if given) or those of the objects ``also`` (a merge's others, whose
     pixels the fit takes over): the best of the starts, each categorical parameter set to
@@ -256,12 +270,17 @@ def scored_fit(sampler, state: Trace, cls: ObjectClass, like: SceneObject, keep=
     the best search wins. With ``polish``, Powell's method then takes at most that many
     scores more (``_Search.polish``). With ``settle`` (names of parameters, a fitted birth's
     place), each search runs twice, the second time first over the other continuous
-    parameters with those held (SETTLE_EVALUATIONS), the better winning. All keep the fit a
+    parameters with those held (SETTLE_EVALUATIONS), the better winning. With ``shrink`` (a
+    fitted birth at a speck's seed), where every start has zero prior the starts are tried
+    again with their sizes scaled by each of SHRINK. All keep the fit a
     deterministic function of its arguments and the state. Returned with the fit: the log
     joint of the state with the fitted object in it (-inf where no start had a finite one)."""
     score = _Scores(sampler, state, cls)
     starts = [v for o in (like, *also) for v in _starts(cls, o, keep)]
     scores = [score(v) for v in starts]
+    if shrink and not np.isfinite(scores).any():
+        starts += [v for start in starts for v in _shrunk(cls, start)]
+        scores = [score(v) for v in starts]
     best = max(scores)
     values = starts[scores.index(best)]
     found = _search(score, values, best, settle)

@@ -67,7 +67,8 @@ def seed_log_probs(seeds: np.ndarray, obj: SceneObject) -> np.ndarray:
     return np.log((1.0 - FLOOR) * near / near.sum() + FLOOR / len(seeds))
 
 
-def fit_at(sampler, state: Trace, cls: ObjectClass, seed) -> tuple[dict, float]:
+def fit_at(sampler, state: Trace, cls: ObjectClass, seed, speck: bool = False
+           ) -> tuple[dict, float]:
     """The deterministic fit of a ``cls`` object into ``state`` from the seed (the search of
     ``sppl.infer.fit`` from the seed, its other parameters from the best of fixed draws of
     the class's prior; and the same search with the place first held at the seed, the better
@@ -75,13 +76,14 @@ def fit_at(sampler, state: Trace, cls: ObjectClass, seed) -> tuple[dict, float]:
     start = cls.sample_prior(np.random.default_rng(0))
     start[cls.position[0]], start[cls.position[1]] = float(seed[0]), float(seed[1])
     return fitting.scored_fit(sampler, state, cls, make_object(sampler.model, cls, start),
-                              keep=cls.position, settle=cls.position)
+                              keep=cls.position, settle=cls.position, shrink=speck)
 
 
-def class_choice(sampler, state: Trace, seed) -> tuple[list[dict], np.ndarray]:
+def class_choice(sampler, state: Trace, seed, speck: bool = False
+                 ) -> tuple[list[dict], np.ndarray]:
     """Every placed class fitted at the seed, and log P(c | x, s) of choosing each
     (``fit.class_log_probs`` of their fits' log joints)."""
-    fits, scores = zip(*(fit_at(sampler, state, cls, seed)
+    fits, scores = zip(*(fit_at(sampler, state, cls, seed, speck)
                          for cls in placed_classes(sampler.model)))
     return list(fits), fitting.class_log_probs(scores)
 
@@ -125,7 +127,7 @@ def propose_fitted_birth(sampler, trace: Trace, rng: np.random.Generator,
     if not len(seeds):
         return None
     s = int(rng.integers(len(seeds))) if seed is None else seed
-    fits, log_p = class_choice(sampler, state, seeds[s])
+    fits, log_p = class_choice(sampler, state, seeds[s], sampler.birth.speck_seeds(state)[s])
     c = fitting.draw_class(rng, log_p) if target is None else \
         fitting.class_index(classes, target.cls)
     cls, fitted = classes[c], fits[c]
@@ -172,7 +174,8 @@ def propose_fitted_death(sampler, trace: Trace, rng: np.random.Generator, k: int
     log_q_back = _log(sampler.jump["fitted_birth"]) - math.log(len(seeds))
 
     def back() -> float:
-        fits, log_p = class_choice(sampler, state, seeds[s])
+        fits, log_p = class_choice(sampler, state, seeds[s],
+                                   sampler.birth.speck_seeds(state)[s])
         c = fitting.class_index(classes, gone.cls)
         return fitting.class_log_prob(log_p, c) + fitting.log_density(classes[c], gone.values,
                                                                       fits[c])
