@@ -346,12 +346,10 @@ def _depth_specks(flagged: np.ndarray, blobs: np.ndarray, strong: np.ndarray,
     return keep[labels]
 
 
-def _depth_edges(rendered: np.ndarray, gap: float) -> np.ndarray:
-    """The pixels of a rendered depth map (H, W) where the depth jumps by more than ``gap``
-    to a neighbour: the outlines of the objects and scenery it draws."""
-    step = np.zeros(rendered.shape, dtype=bool)
-    across = np.abs(np.diff(rendered, axis=1)) > gap
-    down = np.abs(np.diff(rendered, axis=0)) > gap
+def _steps(across: np.ndarray, down: np.ndarray) -> np.ndarray:
+    """Both pixels of every step flagged between neighbours across (H, W - 1) and down
+    (H - 1, W)."""
+    step = np.zeros((across.shape[0], down.shape[1]), dtype=bool)
     step[:, 1:] |= across
     step[:, :-1] |= across
     step[1:] |= down
@@ -359,16 +357,18 @@ def _depth_edges(rendered: np.ndarray, gap: float) -> np.ndarray:
     return step
 
 
+def _depth_edges(rendered: np.ndarray, gap: float) -> np.ndarray:
+    """The pixels of a rendered depth map (H, W) where the depth jumps by more than ``gap``
+    to a neighbour: the outlines of the objects and scenery it draws."""
+    return _steps(np.abs(np.diff(rendered, axis=1)) > gap,
+                  np.abs(np.diff(rendered, axis=0)) > gap)
+
+
 def _edges(rendered: np.ndarray) -> np.ndarray:
     """The pixels within two of an edge in a render (H, W, 3): where its colour changes by
     more than COLOUR_GAP from one pixel to the next."""
-    step = np.zeros(rendered.shape[:2], dtype=bool)
-    across = np.abs(np.diff(rendered, axis=1)).mean(axis=-1) > COLOUR_GAP
-    down = np.abs(np.diff(rendered, axis=0)).mean(axis=-1) > COLOUR_GAP
-    step[:, 1:] |= across
-    step[:, :-1] |= across
-    step[1:] |= down
-    step[:-1] |= down
+    step = _steps(np.abs(np.diff(rendered, axis=1)).mean(axis=-1) > COLOUR_GAP,
+                  np.abs(np.diff(rendered, axis=0)).mean(axis=-1) > COLOUR_GAP)
     return ndimage.binary_dilation(step, structure=_CROSS, iterations=2)
 
 
