@@ -36,7 +36,7 @@ from toys import COLOURS
 
 from sppl import verify
 from sppl.infer import fit as fitting
-from sppl.infer import merge, misfit
+from sppl.infer import merge, misfit, redundant
 from sppl.infer.birth import BirthProposal
 from sppl.infer.chain import Sampler
 from sppl.model.distributions import Categorical, Gamma, Normal, Uniform
@@ -138,6 +138,26 @@ def refit_choice_report(setting, seed=0, draws=1000) -> Report:
     chosen = pc.misfit_state(sampler, state.noise, rng, tries=15)
     assert chosen is not None
     return Report(pc.refit_choice_rows(sampler, chosen, rng, draws), ALPHA)
+
+
+def merge_first_report(setting, monkeypatch, seed=0, draws=1000) -> Report:
+    """The merge's first object with ``merge_focus`` set, in the crowded state the partners'
+    check uses, its deaths weighed at a nat apiece (redundant.NATS) so that 48x48 cameras'
+    costs, tens of nats, make the choice far from uniform."""
+    import dataclasses
+
+    monkeypatch.setattr(redundant, "NATS", 1.0)
+    sampler, state, _ = setting
+    focused = dataclasses.replace(sampler.model, inference=dataclasses.replace(
+        sampler.model.inference, merge_focus=0.75))
+    sampler = Sampler(focused, sampler.scorer, np.random.default_rng(seed))
+    crowded = pc.crowded_state(sampler, state.noise, np.random.default_rng(seed), tries=30)
+    assert crowded is not None
+    state = crowded[0]
+    p = np.exp(redundant.log_probs(sampler, state))
+    assert len(p) >= 2 and p.max() > 1.5 / len(p), p
+    return Report(pc.merge_first_rows(sampler, state, np.random.default_rng(seed), draws),
+                  ALPHA)
 
 
 # -- the ways to break each density, sampling left as it is -----------------------------------
@@ -249,6 +269,12 @@ def refit_choice_focus_halved(monkeypatch):
     _objects_chosen_right(monkeypatch, halved)
 
 
+def merge_first_is_uniform(monkeypatch):
+    """The merge draws its first object uniformly while its ratio weighs the focused choice."""
+    monkeypatch.setattr(redundant, "choose",
+                        lambda sampler, trace, rng: int(rng.integers(len(trace.objects))))
+
+
 # -- the checks pass on the code ---------------------------------------------------------------
 
 
@@ -287,6 +313,12 @@ def test_refit_objects_match_their_probabilities(wide):
     chosen = pc.misfit_state(sampler, state.noise, np.random.default_rng(0), tries=15)
     p = np.exp(misfit.choice_log_probs(sampler, chosen))
     assert p.max() > 1.5 / len(p), p
+
+
+def test_merge_first_objects_match_their_probabilities(wide, monkeypatch):
+    """False alarm 1e-3 (Holm); the state's choice is far from uniform."""
+    report = merge_first_report(wide, monkeypatch)
+    assert report.passed, report.table()
 
 
 def test_the_refit_aims_at_the_object_the_pixels_disagree_with(wide):
@@ -340,6 +372,12 @@ def test_a_wrong_refit_density_is_caught(setting, monkeypatch, brk):
 def test_a_wrong_refit_choice_is_caught(wide, monkeypatch, brk):
     brk(monkeypatch)
     report = refit_choice_report(wide)
+    assert _smallest_p(report) < POWER, report.table()
+
+
+def test_a_wrong_merge_first_choice_is_caught(wide, monkeypatch):
+    merge_first_is_uniform(monkeypatch)
+    report = merge_first_report(wide, monkeypatch)
     assert _smallest_p(report) < POWER, report.table()
 
 

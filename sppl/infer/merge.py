@@ -8,7 +8,10 @@ half that is left. A merge removes object i and refits object j in the scene wit
 so the fit can grow j over the pixels i explained (its search starts from the best of j's
 values and those of the objects taken away, as a fit of each class would start from them):
 
-    merge (x- + i + j -> x- + y): i uniform among the n objects, j among the others with
+    merge (x- + i + j -> x- + y): i uniform among the n objects (or, with the model's
+        ``merge_focus``, by how little the state loses without it: sppl.infer.redundant,
+        whose q(i | x) then stands for 1 / n below, and q(i | x- + i + j) is scored in a
+        split's reverse), j among the others with
         probability w(i, j) / sum_l w(i, l), where w(i, j) = exp(-|p_i - p_j|^2 / (2 R^2))
         with p an object's ground position, or exp(-g^2 / (2 P^2)) with g the pixels between
         the two objects' rectangles in the camera where they are nearest, whichever is larger
@@ -62,6 +65,7 @@ import numpy as np
 
 from ..model.trace import SceneObject, Trace, make_object
 from . import fit as fitting
+from . import redundant
 from .moves import Proposal, _log
 
 # How near a merge partner is looked for: at RADIUS metres on the ground, or PIXELS pixels
@@ -159,6 +163,16 @@ class MergeSplit:
         return propose_merge(sampler, after, sampler.rng, i=self.other_places[0],
                              j=self.fitted_place, more=self.other_places[1:],
                              state=self.state, target=before.objects[single])
+
+
+def _chosen_first(sampler, objects, noise, i: int, back, bound):
+    """``back`` and ``bound`` of a split with the merge's focused choice of ``i`` in the
+    state ``objects`` (``redundant.log_probs``) added to them."""
+    def with_choice() -> float:
+        state = sampler.make_trace(objects, noise)
+        return back() + float(redundant.log_probs(sampler, state)[i])
+
+    return with_choice, bound + redundant.log_prob_bound(sampler, len(objects))
 
 
 def log_q_born(sampler, obj: SceneObject, state: Trace) -> float:
@@ -271,7 +285,7 @@ def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None
     model = sampler.model
     n_classes = len(model.classes)
     screen = screen_of(sampler)
-    i = int(rng.integers(n)) if i is None else i
+    i = redundant.choose(sampler, trace, rng) if i is None else i
     logw = partner_log_weights(objects, i, screen)
     if j is None:
         j = int(rng.choice(n, p=np.exp(logw)))
@@ -297,7 +311,7 @@ def propose_merge(sampler, trace: Trace, rng: np.random.Generator, i: int | None
     tag = MergeSplit(state, j, taken)
     if not math.isfinite(new.log_prior):
         return Proposal("merge", old.cls.name, merged, trace.noise, (new,), -math.inf, tries=tag)
-    log_q_forward = (_log(sampler.jump["merge"]) - math.log(n)
+    log_q_forward = (_log(sampler.jump["merge"]) + float(redundant.log_probs(sampler, trace)[i])
                      + count_log_prob(len(taken), taken_counts(n))
                      + chosen_log_prob(logw, logw_j, i, j, more)
                      + fitting.class_log_prob(log_p, c)
@@ -363,10 +377,15 @@ def propose_split(sampler, trace: Trace, rng: np.random.Generator, k: int | None
     logw = partner_log_weights(split, i, screen)
     logw_j = partner_log_weights(split, j, screen)
     # log q(reverse), less the merge's class choice and fitted density of old, which are
-    # deferred (Sampler.decide).
-    log_q_back = (_log(sampler.jump["merge"]) - math.log(n)
+    # deferred (Sampler.decide), and, with a focused choice, less the merge's choice of i.
+    log_q_back = (_log(sampler.jump["merge"])
                   + count_log_prob(len(born), taken_counts(n))
                   + chosen_log_prob(logw, logw_j, i, j, more))
     back, bound = merged_back(sampler, state, old, fitted, born)
+    if model.inference.merge_focus == 0.0:
+        log_q_back -= math.log(n)
+    else:
+        # The choice needs the split state's deaths scored: only when the bound cannot decide.
+        back, bound = _chosen_first(sampler, split, trace.noise, i, back, bound)
     return Proposal("split", old.cls.name, split, trace.noise, (fitted, *born),
                     log_q_back - log_q_forward, tries=tag, deferred=back, deferred_bound=bound)

@@ -26,8 +26,8 @@ _RENDER_KEYS = ("background", "ambient", "light", "intensity", "sheen", "gain", 
 _NONNEGATIVE = ("ambient", "intensity", "sheen", "gain", "red", "blue")
 _UNIT = ("ambient", "sheen")
 _INFERENCE_KEYS = ("p_jump", "data_birth", "data_birth_spread", "refit_focus", "fit_births",
-                   "merge_seeds", "merge_polish", "face_steps", "adapt", "anneal", "anneal_from",
-                   "tries", "tempered", "tempered_from")
+                   "merge_seeds", "merge_polish", "merge_focus", "face_steps", "adapt", "anneal",
+                   "anneal_from", "tries", "tempered", "tempered_from")
 # Inference settings that count something, at least 0: what each counts, and the hint of its
 # error.
 _COUNTS = {"adapt": ("sweeps", "0 switches it off"), "anneal": ("sweeps", "0 switches it off"),
@@ -154,9 +154,10 @@ class Settings:
                     self.error(
                         f"`data_birth_spread` must be positive, got {value:g}", item.value.span
                     )
-                elif key == "refit_focus" and not 0.0 <= value <= 1.0:
-                    self.error(f"`refit_focus` is a share in [0, 1], got {value:g}",
-                               item.value.span, "0 chooses the object to refit uniformly")
+                elif key in ("refit_focus", "merge_focus") and not 0.0 <= value <= 1.0:
+                    what = "to refit" if key == "refit_focus" else "a merge takes away"
+                    self.error(f"`{key}` is a share in [0, 1], got {value:g}", item.value.span,
+                               f"0 chooses the object {what} uniformly")
                 elif key == "fit_births" and not 0.0 < value < 1.0:
                     self.error(
                         f"`fit_births` is a share strictly between 0 and 1, got {value:g}",

@@ -36,7 +36,7 @@ import numpy as np
 from scipy import stats
 
 from ..infer import fit as fitting
-from ..infer import fitted_birth, merge, misfit
+from ..infer import fitted_birth, merge, misfit, redundant
 from ..infer.chain import Sampler
 from ..model.domains import Finite, Integer, Interval, Periodic
 from ..model.trace import SceneObject, Trace, make_object
@@ -297,6 +297,35 @@ def merge_partner(sampler: Sampler, trace: Trace, i: int, rng: np.random.Generat
     raise RuntimeError("propose_merge made no choice of partner")
 
 
+def merge_first(sampler: Sampler, trace: Trace, rng: np.random.Generator) -> int:
+    """The first object ``merge.propose_merge`` takes away in ``trace``: the move's own code
+    run up to the choice, and stopped where its fit would begin."""
+    objects = trace.objects
+    original = merge.merged_fits
+
+    def stop(sampler_, state, like, also, *_, **__):
+        raise _Chosen(next(k for k, o in enumerate(objects) if o is also[0]))
+
+    merge.merged_fits = stop
+    try:
+        merge.propose_merge(sampler, trace, rng, state=trace)
+    except _Chosen as chosen:
+        return chosen.place
+    finally:
+        merge.merged_fits = original
+    raise RuntimeError("propose_merge made no choice of object")
+
+
+def merge_first_rows(sampler: Sampler, trace: Trace, rng: np.random.Generator,
+                     draws: int) -> list[Row]:
+    """The first objects ``merge.propose_merge`` takes away in ``trace``, against
+    ``redundant.log_probs`` (what its ratio, and its split's reverse, use): ``choice_rows``."""
+    log_q = redundant.log_probs(sampler, trace)
+    chosen = [merge_first(sampler, trace, rng) for _ in range(draws)]
+    return choice_rows(f"merge's first object of {len(trace.objects)}", "objects", chosen,
+                       log_q)
+
+
 def partner_rows(sampler: Sampler, trace: Trace, i: int, rng: np.random.Generator,
                  draws: int) -> list[Row]:
     """The partners ``merge.propose_merge`` chooses for object i, against
@@ -528,6 +557,12 @@ def check_proposals(model: Model, *, seed=0, size: int = 16, draws: int = 150,
                          "any doubt; partners untested.")
         else:
             rows += partner_rows(sampler, *crowded, rng, partner_draws)
+    if _uses(sampler, "merge", "split") and model.inference.merge_focus > 0.0:
+        if len(state.objects) < 2:
+            notes.append("proposals: the scene less one object has fewer than two objects; "
+                         "the merge's choice of its first object untested.")
+        else:
+            rows += merge_first_rows(sampler, state, rng, partner_draws)
     notes.append(f"proposals: {size}x{size} verify cameras, the scene less one "
                  f"{missing.cls.name} ({len(sampler.birth.points(state))} unexplained points); "
                  f"{draws} draws per transform, {weights} per identity.")
