@@ -553,16 +553,15 @@ def check_proposals(model: Model, *, seed=0, size: int = 16, draws: int = 150,
     if _uses(sampler, "merge", "split", "fitted_split", "fitted_merge"):
         crowded = crowded_state(sampler, state.noise, rng)
         if crowded is None:
+            first = (" and the merge's choice of its first object"
+                     if _uses(sampler, "merge", "split") and model.inference.merge_focus > 0.0
+                     else "")
             notes.append("proposals: no state of three or more objects gave a merge partner "
-                         "any doubt; partners untested.")
+                         f"any doubt; partners{first} untested.")
         else:
             rows += partner_rows(sampler, *crowded, rng, partner_draws)
-    if _uses(sampler, "merge", "split") and model.inference.merge_focus > 0.0:
-        if len(state.objects) < 2:
-            notes.append("proposals: the scene less one object has fewer than two objects; "
-                         "the merge's choice of its first object untested.")
-        else:
-            rows += merge_first_rows(sampler, state, rng, partner_draws)
+            if _uses(sampler, "merge", "split") and model.inference.merge_focus > 0.0:
+                rows += merge_first_rows(sampler, crowded[0], rng, partner_draws)
     notes.append(f"proposals: {size}x{size} verify cameras, the scene less one "
                  f"{missing.cls.name} ({len(sampler.birth.points(state))} unexplained points); "
                  f"{draws} draws per transform, {weights} per identity.")
