@@ -272,48 +272,45 @@ def refit_rows(sampler: Sampler, state: Trace, cls: ObjectClass, like: SceneObje
 
 
 class _Chosen(Exception):
-    """Raised where a merge would start its fit, carrying the partner it chose."""
+    """Raised where a move would start its fit, carrying the place of the object it chose."""
 
     def __init__(self, place: int) -> None:
         self.place = place
 
 
-def merge_partner(sampler: Sampler, trace: Trace, i: int, rng: np.random.Generator) -> int:
-    """The partner ``merge.propose_merge`` chooses for object i of ``trace``: the move's own
-    code run up to the choice, and stopped where its fit would begin."""
-    objects = trace.objects
-    original = merge.merged_fits
+def _stopped_choice(module, fit: str, objects, chosen_of, run: Callable[[], Any]) -> int:
+    """The place in ``objects`` of the object a move chooses: the move's own code (``run``)
+    run up to the choice, and stopped where its fit, ``module.fit``, would begin;
+    ``chosen_of`` reads the chosen object from that call's arguments."""
+    original = getattr(module, fit)
 
-    def stop(sampler_, state, like, *_, **__):
-        raise _Chosen(next(k for k, o in enumerate(objects) if o is like))
+    def stop(*args, **_):
+        chosen = chosen_of(*args)
+        raise _Chosen(next(k for k, o in enumerate(objects) if o is chosen))
 
-    merge.merged_fits = stop
+    setattr(module, fit, stop)
     try:
-        merge.propose_merge(sampler, trace, rng, i=i, state=trace)
+        run()
     except _Chosen as chosen:
         return chosen.place
     finally:
-        merge.merged_fits = original
-    raise RuntimeError("propose_merge made no choice of partner")
+        setattr(module, fit, original)
+    raise RuntimeError(f"the move made no choice before {fit}")
+
+
+def merge_partner(sampler: Sampler, trace: Trace, i: int, rng: np.random.Generator) -> int:
+    """The partner ``merge.propose_merge`` chooses for object i of ``trace`` (the object it
+    fits from)."""
+    return _stopped_choice(merge, "merged_fits", trace.objects,
+                           lambda sampler_, state, like, *_: like,
+                           lambda: merge.propose_merge(sampler, trace, rng, i=i, state=trace))
 
 
 def merge_first(sampler: Sampler, trace: Trace, rng: np.random.Generator) -> int:
-    """The first object ``merge.propose_merge`` takes away in ``trace``: the move's own code
-    run up to the choice, and stopped where its fit would begin."""
-    objects = trace.objects
-    original = merge.merged_fits
-
-    def stop(sampler_, state, like, also, *_, **__):
-        raise _Chosen(next(k for k, o in enumerate(objects) if o is also[0]))
-
-    merge.merged_fits = stop
-    try:
-        merge.propose_merge(sampler, trace, rng, state=trace)
-    except _Chosen as chosen:
-        return chosen.place
-    finally:
-        merge.merged_fits = original
-    raise RuntimeError("propose_merge made no choice of object")
+    """The first object ``merge.propose_merge`` takes away in ``trace``."""
+    return _stopped_choice(merge, "merged_fits", trace.objects,
+                           lambda sampler_, state, like, also, *_: also[0],
+                           lambda: merge.propose_merge(sampler, trace, rng, state=trace))
 
 
 def merge_first_rows(sampler: Sampler, trace: Trace, rng: np.random.Generator,
@@ -355,22 +352,10 @@ def partner_rows(sampler: Sampler, trace: Trace, i: int, rng: np.random.Generato
 
 
 def refit_object(sampler: Sampler, trace: Trace, rng: np.random.Generator) -> int:
-    """The object ``fit.propose_refit`` chooses in ``trace``: the move's own code run up to
-    the choice, and stopped where its fit would begin."""
-    objects = trace.objects
-    original = fitting.refitted_classes
-
-    def stop(sampler_, state, like):
-        raise _Chosen(next(k for k, o in enumerate(objects) if o is like))
-
-    fitting.refitted_classes = stop
-    try:
-        fitting.propose_refit(sampler, trace, rng, state=trace)
-    except _Chosen as chosen:
-        return chosen.place
-    finally:
-        fitting.refitted_classes = original
-    raise RuntimeError("propose_refit made no choice of object")
+    """The object ``fit.propose_refit`` chooses in ``trace``."""
+    return _stopped_choice(fitting, "refitted_classes", trace.objects,
+                           lambda sampler_, state, like: like,
+                           lambda: fitting.propose_refit(sampler, trace, rng, state=trace))
 
 
 def choice_rows(label: str, options: str, chosen, log_q: np.ndarray) -> list[Row]:
