@@ -175,12 +175,8 @@ class BirthProposal:
         return self._seed_table(trace)[1]
 
     def _seed_table(self, trace) -> tuple[np.ndarray, np.ndarray]:
-        if trace.renders is None:
-            return np.empty((0, 2)), np.zeros(0, dtype=bool)
-        cached = trace.cache.get("birth_seeds")
-        if cached is None:
-            cached = trace.cache["birth_seeds"] = self._seeds(trace.renders)
-        return cached
+        return _cached(trace, "birth_seeds", self._seeds,
+                       (np.empty((0, 2)), np.zeros(0, dtype=bool)))
 
     def _seeds(self, renders) -> tuple[np.ndarray, np.ndarray]:
         found = []  # (pixels, order found, point, a speck)
@@ -278,10 +274,11 @@ def _measured(observed: np.ndarray, valid: np.ndarray | None, far: float) -> np.
     return ok & valid if valid is not None else ok
 
 
-def _cached(trace, key: str, compute) -> np.ndarray:
-    """``compute(trace.renders)``, kept in the trace's cache; no points without renders."""
+def _cached(trace, key: str, compute, empty=None):
+    """``compute(trace.renders)``, kept in the trace's cache; ``empty`` (no points) without
+    renders."""
     if trace.renders is None:
-        return np.empty((0, 2))
+        return np.empty((0, 2)) if empty is None else empty
     cached = trace.cache.get(key)
     if cached is None:
         cached = trace.cache[key] = compute(trace.renders)
