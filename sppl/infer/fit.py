@@ -41,6 +41,7 @@ import numpy as np
 from scipy import optimize
 
 from ..model.domains import Finite, Periodic
+from ..model.geometry import span
 from ..model.trace import SceneObject, Trace, make_object
 from ..model.types import ObjectClass
 from . import misfit
@@ -121,15 +122,35 @@ def _starts(cls: ObjectClass, like: SceneObject, keep=None) -> list[dict[str, An
         values = cls.sample_prior(rng)
         values.update({n: like.values[n] for n in shared})
         starts.append(values)
+    size = span(like.parts) if keep is None and like.cls.name != cls.name else 0.0
+    if size > 0.0:
+        starts += [_sized(cls, v, size) for v in starts]
     return starts
+
+
+def _sizes(cls: ObjectClass) -> list[str]:
+    """The names of a class's sizes: its continuous parameters other than its place and
+    angles."""
+    return [p.name for p in cls.parameters if p.continuous and not isinstance(p.domain, Periodic)
+            and p.name not in (cls.position or ())]
+
+
+def _sized(cls: ObjectClass, values, size: float) -> dict[str, Any]:
+    """``values`` with its sizes scaled so that the object's span (``geometry.span``) is
+    ``size``, the span of the object it replaces; twice, for classes whose span does not
+    grow in proportion to their sizes."""
+    for _ in range(2):
+        own = span(cls.parts(values))
+        if not (own > 0.0 and math.isfinite(own)):
+            break
+        values = {**values, **{n: values[n] * size / own for n in _sizes(cls)}}
+    return values
 
 
 def _shrunk(cls: ObjectClass, values) -> list[dict[str, Any]]:
     """``values`` with its sizes (the continuous parameters other than its place and angles)
     scaled by each of SHRINK."""
-    sizes = [p.name for p in cls.parameters if p.continuous and not isinstance(p.domain, Periodic)
-             and p.name not in (cls.position or ())]
-    return [{**values, **{n: values[n] * f for n in sizes}} for f in SHRINK]
+    return [{**values, **{n: values[n] * f for n in _sizes(cls)}} for f in SHRINK]
 
 
 def _score(sampler, state: Trace, cls: ObjectClass, values) -> float:

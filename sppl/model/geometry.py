@@ -124,6 +124,25 @@ def ground_points(parts: tuple[Part, ...] | list[Part]) -> np.ndarray:
     return np.concatenate([(_outline(p.primitive) @ p.matrix.T)[:, :2] for p in parts])
 
 
+def span(parts: tuple[Part, ...] | list[Part]) -> float:
+    """The diagonal of the parts' bounding box in the world: how big an object is, in metres,
+    whatever its class and shape (a shape made of other shapes, which has no unit mesh,
+    counts its footprint's outline, at its widest height); 0 for no parts."""
+    corners = []
+    for p in parts:
+        try:
+            low, high = unit_mesh(p.primitive).bounds
+            box = np.array([[x, y, z, 1.0] for x in (low[0], high[0])
+                            for y in (low[1], high[1]) for z in (low[2], high[2])])
+        except KeyError:
+            box = _outline(p.primitive)
+        corners.append((box @ p.matrix.T)[:, :3])
+    if not corners:
+        return 0.0
+    points = np.concatenate(corners)
+    return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+
+
 def footprint_of(parts: tuple[Part, ...] | list[Part]) -> np.ndarray:
     """The convex ground-plane footprint of some parts: an (M, 2) counter-clockwise polygon."""
     hull = shapely.convex_hull(shapely.MultiPoint(ground_points(parts)))
