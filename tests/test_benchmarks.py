@@ -1,6 +1,7 @@
 """The benchmark scripts run end to end and print their tables (the figures themselves are
 recorded in benchmarks/README.md, never asserted: the machines that run tests are shared)."""
 
+import math
 import subprocess
 import sys
 
@@ -64,6 +65,7 @@ def test_prior_scenes_benchmark_runs_and_draws_scenes_in_view(root, require_gl, 
     assert "| shapes | " in out and "/1 |" in out
     rows = __import__("json").loads(run.read_text())
     assert [(r["model"], r["scene"], r["objects"]) for r in rows] == [("shapes", 1, 3)]
+    assert "same noise" in out and math.isfinite(rows[0]["gap_same_noise"])
 
     sys.path.insert(0, str(root / "benchmarks"))
     try:
