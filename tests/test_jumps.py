@@ -93,7 +93,9 @@ def observed_chain(tries: int, sweeps: int = 60, seed: int = 1):
 # when a merged object did (sppl/infer/merge.py), and again when a refitted one did
 # (sppl/infer/fit.py); and observed3 when a fitted birth's fit also searched with the place
 # held at its seed (sppl/infer/fit.py); and the two observed chains when depth specks seeded
-# and fits at a speck's seed shrank their starts (sppl/infer/birth.py, sppl/infer/fit.py).
+# and fits at a speck's seed shrank their starts (sppl/infer/birth.py, sppl/infer/fit.py);
+# and observed3 when a fit of another class also started from draws sized to the object it
+# replaces (sppl/infer/fit.py).
 RECORDED = Path(__file__).parent / "fixtures" / "jump_chains.json"
 CHAINS = {"prior1": lambda: prior_chain(1), "prior3": lambda: prior_chain(3),
           "observed1": lambda: observed_chain(1), "observed3": lambda: observed_chain(3)}
