@@ -167,16 +167,16 @@ def test_every_merge_and_split_and_its_reverse(require_gl):
     assert {"merge: reverse undoes it", "split: reverse undoes it"} <= names
 
 
-def searching(model, seeds=2, polish=40):
+def searching(model, seeds=2, polish=40, anchor=24):
     return dataclasses.replace(model, inference=dataclasses.replace(
-        model.inference, merge_seeds=seeds, merge_polish=polish))
+        model.inference, merge_seeds=seeds, merge_polish=polish, merge_anchor=anchor))
 
 
 @pytest.mark.false_alarm(EACH)
 def test_every_merge_and_split_and_its_reverse_with_a_further_search(require_gl):
-    """With the merged object's fit searched from the seeds and polished (merge_seeds,
-    merge_polish), a merge and its split still undo each other exactly: both directions fit
-    it alike."""
+    """With the merged object's fit searched from the seeds, by anchored steps and polished
+    (merge_seeds, merge_anchor, merge_polish), a merge and its split still undo each other
+    exactly: both directions fit it alike."""
     report = verify.move_checks(searching(with_merges(seen_world())), states=12, seed=5)
     assert report.passed, report.table()
     assert {"merge: reverse undoes it", "split: reverse undoes it"} <= {

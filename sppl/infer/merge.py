@@ -187,11 +187,14 @@ def _without(objects, *places) -> tuple:
 def merge_search(sampler) -> dict[str, int]:
     """How far a merge's fit searches (``sppl.infer.fit.fit``): from the model's
     ``merge_seeds`` seeds of the scene without the merged objects besides their values, and
-    ``merge_polish`` evaluations of Powell's method. Only the fit of the merged object (in the
-    merge, and in the split's reverse) searches further; the split's fit of its object from
-    the one it splits, which only shrinks it, is the refit's."""
+    ``merge_polish`` evaluations of Powell's method, and ``merge_anchor`` evaluations of
+    anchored steps (a size or angle moved with the place so that one corner stays put) after
+    each pattern search. Only the fit of the merged object (in the merge, and in the split's
+    reverse) searches further; the split's fit of its object from the one it splits, which
+    only shrinks it, is the refit's."""
     settings = sampler.model.inference
-    return {"seeds": settings.merge_seeds, "polish": settings.merge_polish}
+    return {"seeds": settings.merge_seeds, "polish": settings.merge_polish,
+            "anchor": settings.merge_anchor}
 
 
 def _refitted(sampler, state: Trace, like: SceneObject, rng: np.random.Generator,

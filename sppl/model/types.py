@@ -238,6 +238,9 @@ class InferenceSettings:
     # Powell's method after it (0: the refit's search alone).
     merge_seeds: int = 0
     merge_polish: int = 0
+    # Evaluations of anchored steps after a merge's pattern search (sppl/infer/fit.py: a size
+    # or angle moved with the place so that one corner stays put); 0: none.
+    merge_anchor: int = 0
     # The share of a merge's choice of the object it takes away that follows how little the
     # state loses without it (sppl/infer/redundant.py; 0: uniform).
     merge_focus: float = 0.0
