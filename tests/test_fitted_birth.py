@@ -240,8 +240,9 @@ def test_a_large_sphere_is_fitted_by_the_search_that_moves_its_place(setting, mo
                 and abs(v["r"] - ball["r"]) < 0.02 for v in fits]
 
     assert all(on_it())
-    monkeypatch.setattr(fitting, "_held_search", lambda score, values, best, held, settle=():
-                        fitting._one_search(score, values, best, held, settle))
+    monkeypatch.setattr(fitting, "_held_search",
+                        lambda score, values, best, held, settle=(), anchor=0:
+                        fitting._one_search(score, values, best, held, settle, anchor))
     assert not all(on_it())
 
 
