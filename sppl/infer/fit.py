@@ -86,10 +86,11 @@ TURNS = 8
 SHRINK = (0.5, 0.25, 0.125, 0.0625)
 # The anchored steps after a merge's pattern search (``_Search.anchored``, the model's
 # ``merge_anchor`` scores at most): a size or angle stepped with the place moved so that one
-# corner of the object stays put, from this many random-walk steps, halved this often. A cube turned 3 degrees too far and
-# shifted to make up for it stands on a ridge that no step of one parameter climbs: each
-# alone uncovers or overpaints a column of pixels (examples/occlusion, a merge's fit: 152
-# nats gained by turning it about a corner, 62 more by the pattern search after).
+# corner of the object stays put, from this many random-walk steps, halved this often. A
+# cube turned 3 degrees too far and shifted to make up for it stands on a ridge that no step
+# of one parameter climbs: each alone uncovers or overpaints a column of pixels
+# (examples/occlusion, a merge's fit: 152 nats gained by turning it about a corner, 62 more
+# by the pattern search after).
 ANCHOR_STEP = 0.5
 ANCHOR_HALVINGS = 4
 # A fitted birth's class, a merged object's and a refitted one's, is the class whose fit
@@ -404,7 +405,8 @@ def anchored_parameters(cls: ObjectClass) -> tuple[str, ...]:
     if cls.position is None:
         return ()
     return tuple(p.name for p in cls.parameters
-                 if p.continuous and not isinstance(p.domain, Finite) and p.name not in cls.position)
+                 if p.continuous and not isinstance(p.domain, Finite)
+                 and p.name not in cls.position)
 
 
 def _corner_shifts(cls: ObjectClass, values, stepped) -> np.ndarray:

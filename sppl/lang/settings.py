@@ -26,8 +26,8 @@ _RENDER_KEYS = ("background", "ambient", "light", "intensity", "sheen", "gain", 
 _NONNEGATIVE = ("ambient", "intensity", "sheen", "gain", "red", "blue")
 _UNIT = ("ambient", "sheen")
 _INFERENCE_KEYS = ("p_jump", "data_birth", "data_birth_spread", "refit_focus", "fit_births",
-                   "merge_seeds", "merge_polish", "merge_anchor", "merge_focus", "face_steps", "adapt", "anneal",
-                   "anneal_from", "tries", "tempered", "tempered_from")
+                   "merge_seeds", "merge_polish", "merge_anchor", "merge_focus", "face_steps",
+                   "adapt", "anneal", "anneal_from", "tries", "tempered", "tempered_from")
 # Inference settings that count something, at least 0: what each counts, and the hint of its
 # error.
 _COUNTS = {"adapt": ("sweeps", "0 switches it off"), "anneal": ("sweeps", "0 switches it off"),
