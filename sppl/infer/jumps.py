@@ -16,7 +16,7 @@ import numpy as np
 
 from ..model.jumps import Jump, jump, register_jump
 from ..model.trace import Trace
-from . import fit, fitted_birth, fitted_split, merge, moves, tries
+from . import fit, fitted_birth, fitted_split, merge, moves, pair_refit, tries
 
 
 def _tries(sampler) -> int:
@@ -81,6 +81,10 @@ def propose_fitted_merge(sampler, trace: Trace, rng: np.random.Generator):
     return fitted_split.propose_fitted_merge(sampler, trace, rng)
 
 
+def propose_pair_refit(sampler, trace: Trace, rng: np.random.Generator):
+    return pair_refit.propose_pair_refit(sampler, trace, rng)
+
+
 def undo_drawn(sampler, before: Trace, proposal, after: Trace):
     """The reverse of a proposal that keeps what it drew (the multiple-try jumps' candidates,
     a refit's or a merge's scene without its objects) through those same draws; of one that
@@ -106,6 +110,7 @@ register_jump(Jump("fitted_split", propose_fitted_split, "fitted_merge", undo_dr
                    needs_observations=True),
               Jump("fitted_merge", propose_fitted_merge, "fitted_split", undo_drawn,
                    needs_observations=True))
+register_jump(Jump("pair_refit", propose_pair_refit, "pair_refit", undo_drawn))
 
 
 def reverse(sampler, before: Trace, proposal, after: Trace):

@@ -91,11 +91,11 @@ COLOUR = 0.25
 MAX_TAKEN = 12
 
 
-def partner_log_weights(objects, i: int, screen=None) -> np.ndarray:
+def partner_log_weights(objects, i: int, screen=None, colour: bool = True) -> np.ndarray:
     """log P(j | i) of a merge over the places j of ``objects`` (-inf at i itself).
     ``screen(o)``, where the scorer knows the cameras, gives the pixel rectangle an object
     covers in each camera (None where out of view); the nearer of the two measures counts,
-    and the colour term multiplies it."""
+    and the colour term (unless ``colour`` is false) multiplies it."""
     def position(o: SceneObject):
         return (o.values[o.cls.position[0]], o.values[o.cls.position[1]]) if o.cls.position \
             else None
@@ -117,7 +117,9 @@ def partner_log_weights(objects, i: int, screen=None) -> np.ndarray:
                     if a is not None and b is not None]
             if gaps:
                 near.append(-0.5 * min(gaps) ** 2 / PIXELS**2)
-        logw[j] = (max(near) if near else 0.0) - 0.5 * _colour_gap(objects[i], o) / COLOUR**2
+        logw[j] = max(near) if near else 0.0
+        if colour:
+            logw[j] -= 0.5 * _colour_gap(objects[i], o) / COLOUR**2
     return logw - np.logaddexp.reduce(logw)
 
 

@@ -511,14 +511,15 @@ def check_proposals(model: Model, *, seed=0, size: int = 16, draws: int = 150,
     rows: list[Row] = []
     notes: list[str] = []
     if sampler.birth.weight > 0 and _uses(sampler, "birth", "replace", "split", "refit",
-                                           "merge", "fitted_split", "fitted_merge"):
+                                           "merge", "fitted_split", "fitted_merge",
+                                           "pair_refit"):
         for cls in model.classes:
             if cls.position:
                 rows += birth_rows(sampler, state, cls, rng, draws, weights)
     else:
         notes.append("proposals: births do not look at the observations (data_birth = 0).")
     if _uses(sampler, "refit", "merge", "split", "fitted_birth", "fitted_death",
-             "fitted_split", "fitted_merge"):
+             "fitted_split", "fitted_merge", "pair_refit"):
         for cls in model.classes:
             rows += refit_rows(sampler, state, cls, missing, rng, draws, weights)
     if _uses(sampler, "refit") and model.inference.refit_focus > 0.0:
