@@ -47,6 +47,7 @@ NOT_FALSE_ALARMS = {
     "test_the_exact_posterior_sees_a_newborn_taken_for_free": "asserts a rejection",
     "test_a_swap_with_its_ratio_reversed_is_caught": "asserts a rejection",
     "test_prior_recovery_sees_a_refit_taken_for_symmetric": "asserts a rejection",
+    "test_prior_recovery_sees_a_pair_refit_taken_for_symmetric": "asserts a rejection",
     "test_prior_recovery_sees_a_side_kept_by_the_step_sign": "asserts a rejection",
     "test_a_class_choice_left_out_of_the_ratio_is_caught": "asserts a rejection",
     "test_prior_recovery_sees_a_multiple_try_birth_without_its_mean": "asserts a rejection",

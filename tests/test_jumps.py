@@ -116,14 +116,15 @@ def test_the_built_in_jumps_and_their_reverses():
     checks, and the default weights are the ones the if-chain, ``moves.JUMPS``, compile's
     ``_REVERSE_JUMPS`` and ``InferenceSettings`` listed."""
     assert jump_names() == ("birth", "death", "change", "replace", "refit", "merge", "split",
-                            "fitted_birth", "fitted_death", "fitted_split", "fitted_merge")
+                            "fitted_birth", "fitted_death", "fitted_split", "fitted_merge",
+                            "pair_refit")
     assert reverse_pairs() == (("birth", "death"), ("merge", "split"),
                                ("fitted_birth", "fitted_death"),
                                ("fitted_split", "fitted_merge"))
     assert InferenceSettings().jump_weights == {
         "birth": 1.0, "death": 1.0, "change": 1.0, "replace": 1.0, "refit": 0.0, "merge": 0.0,
         "split": 0.0, "fitted_birth": 0.0, "fitted_death": 0.0, "fitted_split": 0.0,
-        "fitted_merge": 0.0}
+        "fitted_merge": 0.0, "pair_refit": 0.0}
     for name in jump_names():
         assert jump(jump(name).reverse).reverse == name
 
