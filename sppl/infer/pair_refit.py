@@ -7,8 +7,9 @@ No move of one object mends it: a refit of the kraft box alone uncovers yellow p
 small yellow box does not cover, and a refit of the yellow box alone cannot grow it into the
 kraft box, which the no-overlap constraint forbids. A merge fits one object where two were.
 Taken out together, the yellow box fitted first in the scene without either, then the kraft
-box fitted beside it, the pair stands 2,307 nats above the state. So does a red cube a chain
-read too small with a needle cone patching its rim (shapes.scn's scene 19: +2,112).
+box fitted beside it, the pair stands 2,307 nats above the state. (On shapes.scn's scene 19,
+a red cube read too small with a needle cone patching its rim, the pair gains 2,112 nats, but
+a refit of the cube alone already gains 1,533.)
 
     pair refit (x- + a + b -> x- + a' + b'): i uniform among the n objects, j among the others
         with probability v(i, j) (the merge's partner weights without their colour term:
