@@ -110,16 +110,10 @@ def propose_pair_refit(sampler, trace: Trace, rng: np.random.Generator,
                      + fitting.log_mixture(sampler, state, a.cls, new_a.values, fit_a)
                      + fitting.log_mixture(sampler, with_a, b.cls, new_b.values, fit_b))
     log_q_choice_back = partner_log_weights(sampler, proposed, i)[j]
-    with_old = sampler.make_trace(rest + (a,), trace.noise)
-
-    def back() -> float:
-        fa = fitting.fit(sampler, state, a.cls, new_a)
-        fb = fitting.fit(sampler, with_old, b.cls, new_b)
-        return (fitting.log_mixture(sampler, state, a.cls, a.values, fa)
-                + fitting.log_mixture(sampler, with_old, b.cls, b.values, fb))
-
-    bound = (fitting.log_mixture_bound(sampler, state, a.cls, a.values)
-             + fitting.log_mixture_bound(sampler, with_old, b.cls, b.values))
+    # The reverse refits a from a' in x-, then b from b' in x- + a.
+    back_a, bound_a = fitting.refitted_back(sampler, state, a, new_a)
+    back_b, bound_b = fitting.refitted_back(
+        sampler, sampler.make_trace(rest + (a,), trace.noise), b, new_b)
     return Proposal("pair_refit", label, proposed, trace.noise, (new_a, new_b),
                     log_q_choice_back - log_q_forward, tries=PairRefit(state, i, j),
-                    deferred=back, deferred_bound=bound)
+                    deferred=lambda: back_a() + back_b(), deferred_bound=bound_a + bound_b)
