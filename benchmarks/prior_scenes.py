@@ -95,14 +95,13 @@ def run_model(name: str, model_path: Path, args, work: Path) -> list[dict]:
         truth_objects, truth_noise = load_scene(model, obs_path / "scene.json")
         tolerance = TOLERANCE.get(name, args.tolerance)
         right = Check(scene["objects"], tolerance)
-        observed = None
+        observed = observed_check(model, obs, obs_path / "scene.json", tolerance)
         if args.chains == 1:
-            observed = observed_check(model, obs, obs_path / "scene.json", tolerance)
             r = solve(model, obs, right, args.chain_seed, args.steps, args.limit,
                       args.check_every, clock=time.process_time, observed=observed)
         else:
             r = solve_run(model_path, obs, right, args.chain_seed, args.chains, args.steps,
-                          args.limit, args.check_every)
+                          args.limit, args.check_every, observed=observed)
         map_objects, _ = load_scene(model, _scene_file(work, r["map"]))
         solved = r["solved_at"] is not None
         map_score = log_joint(model, obs, map_objects, r["map"]["noise"])
@@ -203,7 +202,7 @@ def main(argv=None) -> int:
           "joint, nats")
     print(f"{'model':12s} {'#':>3} {'objects':>7} {'solved':>6} {'seconds':>8} {'steps':>6} "
           f"{'count':>6} {'class':>5} {'categ':>5} {'MAP - truth':>12} {'same noise':>10}"
-          + (f" {'observed':>8}" if args.chains == 1 else ""))
+          f" {'observed':>8}")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.models:

@@ -287,12 +287,13 @@ def run_leader(scores, rights) -> int | None:
 
 
 def _run_chain_of(model_path, obs, right, index, seed, steps, limit, check_every, shared,
-                  results) -> None:
+                  results, observed=None) -> None:
     """Chain ``index`` of a run of several, in its own process (and so its own GL context
     and CPU clock). After each MAP check it posts its MAP's log joint and whether it is right
     to ``shared``; the run is solved, and every chain stops, at the first check where the
-    run's MAP (``run_leader``) is right."""
-    scores, rights, solved = shared
+    run's MAP (``run_leader``) is right. With ``observed``, the first check where the run's
+    MAP passes it is posted too (its step and this chain's seconds)."""
+    scores, rights, solved, oks, seen = shared
     model = load_model(model_path)
     state = {"seconds": None, "errors": None, "last_best": None}
     t0 = time.process_time()
@@ -310,6 +311,10 @@ def _run_chain_of(model_path, obs, right, index, seed, steps, limit, check_every
             with solved.get_lock():
                 scores[index], rights[index] = best.score, right(pruned)
                 leader = run_leader(scores[:], rights[:])
+                if observed is not None:
+                    oks[index] = observed(pruned)
+                    if seen[0] < 0 and leader is not None and oks[leader]:
+                        seen[0], seen[1] = step, elapsed
                 if not solved.value and leader is not None and rights[leader]:
                     solved.value = 1
                     state["seconds"] = elapsed
@@ -331,24 +336,29 @@ def _run_chain_of(model_path, obs, right, index, seed, steps, limit, check_every
         raise
 
 
-def solve_run(model_path, obs, right, seed, chains, steps, limit, check_every) -> dict:
+def solve_run(model_path, obs, right, seed, chains, steps, limit, check_every,
+              observed=None) -> dict:
     """A run of ``chains`` chains, each in its own process with the seeds ``sppl sample
     --chains`` gives them, each stopping after ``limit`` CPU seconds of its own. The run is
     solved at the first MAP check, in any chain, after which the run's MAP (the best of the
     chains' MAPs, ``run_leader``) is right: a right chain below another chain's more probable
     wrong MAP does not count. Seconds are the CPU seconds of the chain whose check solved the
-    run; on a machine with a core per chain they are also the run's wall time."""
+    run; on a machine with a core per chain they are also the run's wall time. With
+    ``observed`` (an ``ObservedCheck``), the first check after which the run's MAP passes it
+    is recorded too (``observed_at``, ``observed_seconds``), as ``solve`` records it for one
+    chain; the chains still run until the run is solved."""
     import multiprocessing as mp
 
     from sppl.runs.run import chain_seeds
 
     ctx = mp.get_context("spawn")
     shared = (ctx.Array("d", [-math.inf] * chains, lock=False),
-              ctx.Array("b", [0] * chains, lock=False), ctx.Value("b", 0))
+              ctx.Array("b", [0] * chains, lock=False), ctx.Value("b", 0),
+              ctx.Array("b", [0] * chains, lock=False), ctx.Array("d", [-1.0, -1.0], lock=False))
     results = ctx.Queue()
     procs = [ctx.Process(target=_run_chain_of,
                          args=(str(model_path), obs, right, k, s, steps, limit, check_every,
-                               shared, results))
+                               shared, results, observed))
              for k, s in enumerate(chain_seeds(seed, chains))]
     for p in procs:
         p.start()
@@ -361,8 +371,11 @@ def solve_run(model_path, obs, right, seed, chains, steps, limit, check_every) -
     runs = [got[k] for k in range(chains)]
     solver = next((r for r in runs if r["seconds"] is not None), None)
     best = solver or max(runs, key=lambda r: r["map"]["score"])
+    seen_at, seen_seconds = shared[4][:]
     return {"solved_at": None if solver is None else solver["steps_run"],
             "seconds": None if solver is None else solver["seconds"],
+            "observed_at": None if seen_at < 0 else int(seen_at),
+            "observed_seconds": None if seen_at < 0 else seen_seconds,
             "errors": best["errors"], "map": best["map"],
             "steps_run": sum(r["steps_run"] for r in runs),
             "total_seconds": max(r["total_seconds"] for r in runs)}

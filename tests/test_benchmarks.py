@@ -112,6 +112,10 @@ def test_prior_scenes_runs_several_chains_and_reports_the_best_of_their_maps(roo
     assert "a run of 2 chains each" in out and "| shapes | " in out
     (row,) = json.loads(run.read_text())
     assert row["chains"] == 2 and row["steps"] > 0 and "score" in row["map"]
+    # as far as the observations tell, asked of the run's MAP as of one chain's
+    assert isinstance(row["observed"], bool) and "unobserved" in row
+    assert row["observed"] or row["observed_seconds"] is None
+    assert not row["solved"] or row["observed"]
 
     run_leader = _benchmarks(root)[1].run_leader
     assert run_leader([-math.inf, -math.inf], [0, 0]) is None
