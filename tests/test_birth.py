@@ -221,6 +221,60 @@ def test_a_speck_apart_from_the_drawn_edges_is_kept_and_one_along_them_is_not():
         np.abs(blob - rendered).mean(axis=-1) > birth.COLOUR_GAP).sum() == 16
 
 
+def test_a_speck_beside_a_drawn_edge_is_kept_when_no_rim_of_it_shows_its_colour():
+    """A green square drawn on a grey floor: a red speck two pixels across beside its edge
+    (a small red cube beside a green one) is kept, since no rim of the green square can
+    show red; a rim of it drawn a pixel off, the square's edge anti-aliased (a blend of
+    green and grey), and a shadow's rim (a darker grey) are not; nor is a red glint on the
+    square itself; and without the colours to judge by, the speck is dropped as before."""
+    from sppl.infer import birth
+
+    rendered = np.full((24, 24, 3), 0.5)
+    rendered[8:14, 8:14] = (0.14, 0.65, 0.19)
+    square = np.zeros((24, 24), dtype=bool)
+    square[8:14, 8:14] = True
+
+    def specks(observed, colours=True):
+        off = np.abs(observed - rendered).mean(axis=-1)
+        beside = birth._Beside(square, observed, rendered, birth.STRONG_COLOUR_GAP)
+        return birth._specks(off > birth.COLOUR_GAP, birth._blobs(off > birth.COLOUR_GAP),
+                             off > birth.STRONG_COLOUR_GAP, birth._edges(rendered) | square,
+                             beside if colours else None)
+
+    red = rendered.copy()
+    red[10:12, 14:16] = (0.7, 0.08, 0.1)
+    assert np.argwhere(specks(red)).tolist() == [[10, 14], [10, 15], [11, 14], [11, 15]]
+    assert not specks(red, colours=False).any()
+    rim = rendered.copy()
+    rim[8:14, 14] = (0.12, 0.6, 0.2)
+    assert not specks(rim).any()
+    blend = rendered.copy()
+    blend[8:14, 14] = 0.4 * np.array((0.14, 0.65, 0.19)) + 0.6 * 0.5 + (0.0, 0.2, 0.0)
+    assert not specks(blend).any()
+    shadow = rendered.copy()
+    shadow[14:16, 8:14] = 0.2
+    assert not specks(shadow).any()
+    glint = rendered.copy()
+    glint[10:12, 12:14] = (0.7, 0.08, 0.1)
+    assert not specks(glint).any()
+
+
+def test_the_cone_distance_is_zero_inside_the_cone_and_grows_outside_it():
+    """A point is in the cone of two colours when it is a non-negative mix of them (a blend,
+    a shade); a colour of another hue lies the mean absolute difference its nearest such mix
+    leaves."""
+    from sppl.infer import birth
+
+    colours = np.array([[0.5, 0.5, 0.5], [0.1, 0.6, 0.2]])
+    inside = np.array([[0.25, 0.25, 0.25], [0.3, 0.55, 0.35], [0.8, 0.8, 0.8], [0.0, 0.0, 0.0]])
+    assert birth._cone_distance(inside, colours) == pytest.approx(np.zeros(4), abs=1e-9)
+    red = np.array([[0.7, 0.0, 0.0]])
+    # Its nearest mix, in mean absolute difference, is black (no light at all: 0.7 / 3);
+    # grey scaled to its least-squares fit (0.7 / 3 a channel) leaves more.
+    assert birth._cone_distance(red, colours) == pytest.approx([0.7 / 3])
+    assert birth._cone_distance(np.array([[0.9, 0.1, 0.1]]), colours) > 0.3
+
+
 def test_a_depth_speck_apart_from_the_drawn_outlines_is_kept_and_a_rim_is_not():
     """A floor 5 m away with a square drawn 3 m away: a column of depth pixels one wide and
     metres nearer, apart from the square, is a speck, whole; so is a pole beside the square

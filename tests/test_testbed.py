@@ -155,3 +155,32 @@ def test_render_script_makes_a_folder_that_agrees(tmp_path, renderers, models):
     frame = next(f for f in load_observations(out).frames if f.depth is not None)
     median, far = depth_agreement(frame, model, objects, renderers(model))
     assert median < 0.025 and far < 0.02, (median, far)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_the_speck_colour_test_adds_no_seed_at_the_truth_of_cycles_renders(
+        name, renderers, models, monkeypatch):
+    """Cycles' edges are anti-aliased, its shadows soft and its light bounced off the floor:
+    at the true scene, a piece of strongly-off pixels beside a drawn edge shows a shade or
+    blend of the colours drawn there, and the birth's colour test (sppl.infer.birth._Beside)
+    keeps none of them as a speck: the seeds are those the rule without it finds."""
+    from sppl.infer import birth
+    from sppl.infer.chain import Sampler
+    from sppl.scoring.scorer import Scorer
+
+    model = models[entry(name)["model"]]
+    folder = TESTBED / name / "cycles"
+    sampler = Sampler(model, Scorer(model, load_observations(folder), renderers(model)),
+                      np.random.default_rng(0))
+    objects, noise = load_scene(model, folder / "scene.json")
+    drawn = sampler.initial_trace().noise
+    noise = {kind: {**drawn[kind], **noise.get(kind, {})} for kind in drawn}
+    with_colours = sampler.birth.seeds(sampler.make_trace(objects, noise))
+
+    class Never(birth._Beside):
+        def unexplained(self, piece, strong):
+            return False
+
+    monkeypatch.setattr(birth, "_Beside", Never)
+    without = sampler.birth.seeds(sampler.make_trace(objects, noise))
+    assert with_colours.tolist() == without.tolist()

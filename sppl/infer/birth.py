@@ -144,8 +144,10 @@ class BirthProposal:
             elif t.kind == "image":
                 off = np.abs(t.observed - rendered).mean(axis=-1)
                 blobs = _blobs(off > COLOUR_GAP)
+                drawn = self._drawn(renders, t.frame)
                 strong = _specks(off > COLOUR_GAP, blobs, off > self.strong_gaps[t.frame],
-                                 _edges(rendered) | self._drawn(renders, t.frame))
+                                 _edges(rendered) | drawn,
+                                 _Beside(drawn, t.observed, rendered, self.strong_gaps[t.frame]))
                 near = blobs | strong
                 # An object seen from above is found where its pixel's ray meets the
                 # surface it stands on, not the ground under a table.
@@ -169,8 +171,8 @@ class BirthProposal:
 
     def speck_seeds(self, trace) -> np.ndarray:
         """Which of ``seeds(trace)`` come from specks (RGB or depth): pieces too small for a
-        blob, apart from what the state draws, where an object a few pixels across stands
-        and not a misplaced object's rim (a fitted birth there may shrink its starts:
+        blob, apart from what the state draws (or beside it, in a colour no rim of it
+        shows), where an object a few pixels across stands and not a misplaced object's rim (a fitted birth there may shrink its starts:
         ``sppl.infer.fit.SHRINK``)."""
         return self._seed_table(trace)[1]
 
@@ -286,7 +288,7 @@ def _cached(trace, key: str, compute, empty=None):
 
 
 def _specks(flagged: np.ndarray, blobs: np.ndarray, strong: np.ndarray,
-            drawn: np.ndarray) -> np.ndarray:
+            drawn: np.ndarray, beside: _Beside | None = None) -> np.ndarray:
     """The pieces of ``flagged`` (4-connected) that hold some ``strong`` pixel and fewer
     than SEED_PIXELS pixels of ``blobs`` (the erosion left too little of them to seed),
     whole, and touch no pixel of ``drawn`` (the render's edges and the objects it draws):
@@ -294,16 +296,79 @@ def _specks(flagged: np.ndarray, blobs: np.ndarray, strong: np.ndarray,
     keeps only its blob, as before, so that the eroded edge of an object the state lacks
     seeds nothing of its own; a piece along an edge the state draws is that edge drawn a
     pixel off (a camera's anti-aliasing, a shadow's soft rim), and one on an object it
-    draws a glint (a metal sphere's highlight), not an object."""
+    draws a glint (a metal sphere's highlight), not an object. With ``beside``, a piece
+    that touches the edges but lies on no object drawn is kept after all when its colour
+    is one no shade or blend of the colours drawn around it gives (``_Beside``): a red cube
+    two pixels across beside a green one, which no rim of the green cube can show."""
     labels, count = ndimage.label(flagged, structure=_CROSS)
     if not count:
         return np.zeros_like(flagged)
     keep = np.zeros(count + 1, dtype=bool)
     keep[np.unique(labels[strong & flagged])] = True
     keep &= np.bincount(labels[blobs], minlength=count + 1) < SEED_PIXELS
-    keep[np.unique(labels[drawn])] = False
-    keep[0] = False
-    return keep[labels]
+    touching = np.zeros(count + 1, dtype=bool)
+    touching[np.unique(labels[drawn])] = True
+    kept = keep & ~touching
+    if beside is not None:
+        for piece in np.flatnonzero(keep & touching):
+            if piece and beside.unexplained(labels == piece, strong):
+                kept[piece] = True
+    kept[0] = False
+    return kept[labels]
+
+
+# The render's pixels within this many of a piece are the colours a rim of what it draws
+# can show: a rim drawn a pixel or two off, and the edges' two pixels of anti-aliasing.
+BESIDE_PIXELS = 3
+
+
+class _Beside:
+    """Whether a piece of strongly-off RGB pixels beside a drawn edge can be that edge
+    drawn a little off. A rim a pixel off shows the colour drawn beside it; a camera's
+    anti-aliased edge a blend of two such colours; a shadow's rim, shading and bounced light
+    a darker or lighter shade of them. Every such colour lies in the cone a u + b v (a, b >=
+    0) of two colours u, v the render draws within BESIDE_PIXELS of the piece; a piece whose
+    strongly-off pixels lie, on average, further than ``gap`` (a mean absolute difference)
+    from every such cone is something the state does not draw."""
+
+    def __init__(self, objects: np.ndarray, observed: np.ndarray, rendered: np.ndarray,
+                 gap: float) -> None:
+        self.objects, self.observed, self.rendered, self.gap = objects, observed, rendered, gap
+
+    def unexplained(self, piece: np.ndarray, strong: np.ndarray) -> bool:
+        if (piece & self.objects).any():
+            return False  # a glint on a drawn object, or a rim drawn on the wrong side
+        around = ndimage.binary_dilation(piece, structure=np.ones((3, 3), dtype=bool),
+                                         iterations=BESIDE_PIXELS)
+        # Colours a twentieth apart are one: the cones of near colours are near.
+        colours = np.unique(np.round(self.rendered[around] * 20.0), axis=0) / 20.0
+        off = self.observed[piece & strong]
+        return bool(_cone_distance(off, colours).mean() > self.gap)
+
+
+def _cone_distance(points: np.ndarray, colours: np.ndarray) -> np.ndarray:
+    """Per point (P, 3), the mean absolute difference between it and its nearest point, in
+    least squares, of the cones a u + b v (a, b >= 0) of every pair of ``colours`` (C, 3),
+    a pair being a colour with itself too."""
+    u = colours[:, None, None, :]
+    v = colours[None, :, None, :]
+    c = points[None, None, :, :]
+    uu, vv, uv = (u * u).sum(-1), (v * v).sum(-1), (u * v).sum(-1)
+    cu, cv = (c * u).sum(-1), (c * v).sum(-1)
+    tiny = 1e-12
+    # Both weights free, where the Gram matrix is not singular and both come out >= 0 ...
+    det = uu * vv - uv * uv
+    a = np.where(det > tiny, (cu * vv - cv * uv) / np.maximum(det, tiny), -1.0)
+    b = np.where(det > tiny, (cv * uu - cu * uv) / np.maximum(det, tiny), -1.0)
+    both = (a >= 0) & (b >= 0)
+    # ... or one of them zero, or both (the black that every cone holds).
+    a1 = np.maximum(cu, 0.0) / np.maximum(uu, tiny)
+    b1 = np.maximum(cv, 0.0) / np.maximum(vv, tiny)
+    fits = [np.where(both[..., None], a[..., None] * u + b[..., None] * v, np.inf),
+            a1[..., None] * u, b1[..., None] * v, np.zeros_like(c)]
+    shape = (len(colours), len(colours), len(points))
+    best = np.min([np.broadcast_to(np.abs(c - f).mean(-1), shape) for f in fits], axis=0)
+    return best.min(axis=(0, 1))
 
 
 def _depth_specks(flagged: np.ndarray, blobs: np.ndarray, strong: np.ndarray,
