@@ -172,8 +172,8 @@ class BirthProposal:
     def speck_seeds(self, trace) -> np.ndarray:
         """Which of ``seeds(trace)`` come from specks (RGB or depth): pieces too small for a
         blob, apart from what the state draws (or beside it, in a colour no rim of it
-        shows), where an object a few pixels across stands and not a misplaced object's rim (a fitted birth there may shrink its starts:
-        ``sppl.infer.fit.SHRINK``)."""
+        shows), where an object a few pixels across stands and not a misplaced object's
+        rim (a fitted birth there may shrink its starts: ``sppl.infer.fit.SHRINK``)."""
         return self._seed_table(trace)[1]
 
     def _seed_table(self, trace) -> tuple[np.ndarray, np.ndarray]:
