@@ -18,7 +18,7 @@ import pytest
 
 from sppl.data.observations import load_observations
 from sppl.lang import load_model
-from sppl.model.simulate import load_scene
+from sppl.model.simulate import load_scene, sample_noise
 
 ROOT = Path(__file__).resolve().parent.parent
 TESTBED = ROOT / "benchmarks" / "testbed"
@@ -173,7 +173,8 @@ def test_the_speck_colour_test_adds_no_seed_at_the_truth_of_cycles_renders(
     sampler = Sampler(model, Scorer(model, load_observations(folder), renderers(model)),
                       np.random.default_rng(0))
     objects, noise = load_scene(model, folder / "scene.json")
-    drawn = sampler.initial_trace().noise
+    # The scene file gives the sensors' sigmas only; the rest (outlier rates) from the prior.
+    drawn = sample_noise(model, np.random.default_rng(0))
     noise = {kind: {**drawn[kind], **noise.get(kind, {})} for kind in drawn}
     with_colours = sampler.birth.seeds(sampler.make_trace(objects, noise))
 
