@@ -150,22 +150,50 @@ class ObservedCheck(Check):
     holds the places of such objects in the truth, ``free`` the values each (place,
     parameter) may take, ``classes`` the other classes each place may take. An estimated
     object stands for the true object it is matched to by position (``match_objects``,
-    within ``tolerance``)."""
+    within ``tolerance``).
 
-    def __init__(self, truth, tolerance: float, droppable, free, classes=None) -> None:
+    ``classes`` comes from a fit, which may fit a class worse than it could. So, given the
+    true scene's ``noise`` and a chain's sampler (``__call__(estimate, sampler)``), an
+    estimated object of another class is also taken for the true one when the true scene
+    with it in the true one's place scores within ``nats`` of the truth, scored as the
+    sampler scores: the observations allow that very object there."""
+
+    def __init__(self, truth, tolerance: float, droppable, free, classes=None,
+                 noise=None, nats: float = ALLOWED_NATS) -> None:
         super().__init__(truth, tolerance)
         self.droppable = frozenset(droppable)
         self.free = {k: frozenset(v) for k, v in free.items()}
         self.classes = {k: frozenset(v) for k, v in (classes or {}).items()}
+        self.noise, self.nats = noise, nats
+        self._allowed: dict[tuple[int, str], bool] = {}
 
-    def _asked(self, estimate):
+    def _in_place(self, t: int, estimated: dict, sampler) -> bool:
+        """Whether the truth with ``estimated`` in place of true object ``t`` scores within
+        ``nats`` of the truth (once per object: a chain checks the same MAP again)."""
+        key = (t, json.dumps(estimated, sort_keys=True))
+        if key not in self._allowed:
+            from sppl.model.trace import make_object
+
+            model = sampler.model
+            classes = {c.name: c for c in model.classes}
+            truth = [make_object(model, classes[o["class"]], o["params"]) for o in self.truth]
+            swapped = truth[:t] + [make_object(model, classes[estimated["class"]],
+                                               estimated["params"])] + truth[t + 1:]
+            self._allowed[key] = (sampler.make_trace(tuple(swapped), self.noise).score
+                                  >= sampler.make_trace(tuple(truth), self.noise).score
+                                  - self.nats)
+        return self._allowed[key]
+
+    def _asked(self, estimate, sampler=None):
         """(the estimate with each free value read as the truth's, the true objects asked
         for: all but the droppable ones that no estimated object stands for)."""
         estimate = [{**e, "params": dict(e["params"])} for e in estimate]
         matched = set()
         for e, t, _ in match_objects(estimate, self.truth, self.tolerance):
             matched.add(t)
-            if estimate[e]["class"] in self.classes.get(t, ()):
+            if estimate[e]["class"] in self.classes.get(t, ()) or (
+                    estimate[e]["class"] != self.truth[t]["class"] and sampler is not None
+                    and self.noise is not None and self._in_place(t, estimate[e], sampler)):
                 estimate[e]["class"] = self.truth[t]["class"]
             for name, value in self.truth[t]["params"].items():
                 if estimate[e]["params"].get(name) in self.free.get((t, name), ()):
@@ -173,11 +201,11 @@ class ObservedCheck(Check):
         asked = [o for t, o in enumerate(self.truth) if t in matched or t not in self.droppable]
         return estimate, asked
 
-    def errors(self, estimate):
-        return compare_scenes(*self._asked(estimate))
+    def errors(self, estimate, sampler=None):
+        return compare_scenes(*self._asked(estimate, sampler))
 
-    def __call__(self, estimate) -> bool:
-        return self.errors(estimate).correct(self.tolerance)
+    def __call__(self, estimate, sampler=None) -> bool:
+        return self.errors(estimate, sampler).correct(self.tolerance)
 
 
 def observed_check(model, obs, scene_file: Path, tolerance: float,
@@ -186,8 +214,8 @@ def observed_check(model, obs, scene_file: Path, tolerance: float,
     ``scene.json``, with their noise): the log joint of the truth without each object in
     turn, with each categorical value of each object changed, and with each object replaced
     by each other placed class fitted in its place (``sppl.infer.fit.scored_fit`` from the
-    true object: a search, so a class it fits worse than it could stays asked for), against
-    the truth's."""
+    true object: a search, so a class it fits worse than it could stays asked for, unless a
+    chain's own object of it passes ``ObservedCheck._in_place``), against the truth's."""
     from sppl.infer import fit as fitting
     from sppl.infer.chain import Sampler
     from sppl.model.simulate import load_scene
@@ -221,7 +249,7 @@ def observed_check(model, obs, scene_file: Path, tolerance: float,
                           and fitting.scored_fit(sampler, rest, c, o)[1] >= best - nats]
     finally:
         renderer.release()
-    return ObservedCheck(truth, tolerance, droppable, free, classes)
+    return ObservedCheck(truth, tolerance, droppable, free, classes, noise, nats)
 
 
 def occlusion_check(model, obs, scene, tolerance: float, nats: float = ALLOWED_NATS):
@@ -257,7 +285,8 @@ def solve(model, obs, right, seed, steps, limit, check_every, full=False,
             state["last_best"] = best
             pruned = [o.as_dict() for o in sampler.prune(best).objects]
             state["errors"], state["note"] = right.errors(pruned), right.note(pruned)
-            if observed is not None and state["observed_at"] is None and observed(pruned):
+            if (observed is not None and state["observed_at"] is None
+                    and observed(pruned, sampler)):
                 state["observed_at"], state["observed_seconds"] = step, clock() - t0
             if right(pruned) and state["solved_at"] is None:
                 state["solved_at"], state["seconds"] = step, clock() - t0
@@ -312,7 +341,7 @@ def _run_chain_of(model_path, obs, right, index, seed, steps, limit, check_every
                 scores[index], rights[index] = best.score, right(pruned)
                 leader = run_leader(scores[:], rights[:])
                 if observed is not None:
-                    oks[index] = observed(pruned)
+                    oks[index] = observed(pruned, sampler)
                     if seen[0] < 0 and leader is not None and oks[leader]:
                         seen[0], seen[1] = step, elapsed
                 if not solved.value and leader is not None and rights[leader]:
