@@ -112,7 +112,7 @@ class BirthProposal:
         return _cached(trace, "birth_points", self._points)
 
     def _points(self, renders) -> np.ndarray:
-        found = [pts for _, pts, _, _ in self._unexplained(renders)]
+        found = [pts for _, pts, _ in self._unexplained(renders)]
         pts = np.concatenate(found) if found else np.empty((0, 2))
         if len(pts) > MAX_POINTS:
             pts = pts[:: math.ceil(len(pts) / MAX_POINTS)]
@@ -123,9 +123,7 @@ class BirthProposal:
         (x, y) of those pixels, in the order ``mask[mask]`` reads them, and which of them
         are strongly off (an RGB pixel STRONG_COLOUR_GAP off): a depth pixel back-projected
         with its measured depth, an RGB pixel's ray followed down to the height objects
-        stand on (an RGB pixel whose ray never gets there is dropped); and per point, the
-        step along the ground its ray makes per metre it rises (toward the camera; zero for
-        a depth pixel, which measured where it is)."""
+        stand on (an RGB pixel whose ray never gets there is dropped)."""
         for t in self.terms:
             dirs, ray_to_z, centre = self.rays[t.frame]
             rendered = self.scorer.rendered(renders, t)
@@ -143,7 +141,6 @@ class BirthProposal:
                     dist = dist / ray_to_z[near]
                 pts = centre + dirs[near] * dist[:, None]
                 strong = strong[near]
-                lifts = np.zeros((len(pts), 2))
             elif t.kind == "image":
                 off = np.abs(t.observed - rendered).mean(axis=-1)
                 blobs = _blobs(off > COLOUR_GAP)
@@ -159,10 +156,9 @@ class BirthProposal:
                 s = (self.floor - centre[2]) / d[:, 2]
                 pts = centre + d * s[:, None]
                 strong = strong[near]
-                lifts = d[:, :2] / d[:, 2:3]
             else:
                 continue
-            yield near, pts[:, :2], strong, lifts
+            yield near, pts[:, :2], strong
 
     def seeds(self, trace) -> np.ndarray:
         """Ground points (S, 2) where whole objects seem to be missing from ``trace``: per
@@ -180,20 +176,13 @@ class BirthProposal:
         rim (a fitted birth there may shrink its starts: ``sppl.infer.fit.SHRINK``)."""
         return self._seed_table(trace)[1]
 
-    def seed_lifts(self, trace) -> np.ndarray:
-        """Per seed of ``seeds(trace)`` (S, 2), the step along the ground toward the camera
-        that saw it per metre its pixels stand above the support: an RGB pixel's ray meets
-        the ground behind the object it shows, by as much more as that pixel stands higher
-        (zero for a depth seed, placed where its pixels measured)."""
-        return self._seed_table(trace)[2]
-
-    def _seed_table(self, trace) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _seed_table(self, trace) -> tuple[np.ndarray, np.ndarray]:
         return _cached(trace, "birth_seeds", self._seeds,
-                       (np.empty((0, 2)), np.zeros(0, dtype=bool), np.empty((0, 2))))
+                       (np.empty((0, 2)), np.zeros(0, dtype=bool)))
 
-    def _seeds(self, renders) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        found = []  # (pixels, order found, point, a speck, lift)
-        for mask, pts, strong, lifts in self._unexplained(renders):
+    def _seeds(self, renders) -> tuple[np.ndarray, np.ndarray]:
+        found = []  # (pixels, order found, point, a speck)
+        for mask, pts, strong in self._unexplained(renders):
             labels, count = ndimage.label(mask, structure=_CROSS)
             of_pixel = labels[mask]
             for blob in range(1, count + 1):
@@ -201,11 +190,10 @@ class BirthProposal:
                 mine = pts[here]
                 if len(mine) >= SEED_PIXELS or strong[here].any():
                     found.append((len(mine), len(found), np.median(mine, axis=0),
-                                  bool(strong[here].all()), lifts[here].mean(axis=0)))
+                                  bool(strong[here].all())))
         found.sort(key=lambda f: (-f[0], f[1]))
         return (np.array([f[2] for f in found[:MAX_SEEDS]]).reshape(-1, 2),
-                np.array([f[3] for f in found[:MAX_SEEDS]], dtype=bool),
-                np.array([f[4] for f in found[:MAX_SEEDS]]).reshape(-1, 2))
+                np.array([f[3] for f in found[:MAX_SEEDS]], dtype=bool))
 
     # -- sampling and density ------------------------------------------------------------------
 

@@ -52,12 +52,6 @@ from .moves import Proposal, _log
 # uniform, so that every seed keeps a chance (a fit can wander from its seed).
 RADIUS = 0.5
 FLOOR = 0.1
-# At an RGB speck's seed the fit also starts this many metres up the pixels' rays (moved
-# toward the camera by the seed's lift, ``BirthProposal.seed_lifts``), the best fit winning:
-# the seed is where the rays meet the ground, behind an object of a few pixels, and from
-# there its fit finds only a sliver of it (shapes_plus 4's red cube 9 cm wide, its pixels
-# 3 to 6 cm up: 188 nats below the truth from the seed, 18 from 6 cm up).
-LIFTS = (0.03, 0.06, 0.1, 0.15)
 
 
 def placed_classes(model) -> tuple[ObjectClass, ...]:
@@ -73,43 +67,25 @@ def seed_log_probs(seeds: np.ndarray, obj: SceneObject) -> np.ndarray:
     return np.log((1.0 - FLOOR) * near / near.sum() + FLOOR / len(seeds))
 
 
-def fit_at(sampler, state: Trace, cls: ObjectClass, seed, speck: bool = False,
-           lift=None) -> tuple[dict, float]:
+def fit_at(sampler, state: Trace, cls: ObjectClass, seed, speck: bool = False
+           ) -> tuple[dict, float]:
     """The deterministic fit of a ``cls`` object into ``state`` from the seed (the search of
     ``sppl.infer.fit`` from the seed, its other parameters from the best of fixed draws of
     the class's prior; and the same search with the place first held at the seed, the better
-    winning), and the log joint of the state with it. At a speck's seed with a ``lift``
-    (``BirthProposal.seed_lifts``), the best of that fit and those from the seed moved by
-    ``lift`` times each of LIFTS."""
-    places = [np.asarray(seed, dtype=float)]
-    if speck and lift is not None and np.any(lift):
-        places += [places[0] + h * np.asarray(lift) for h in LIFTS]
-    best = None
-    for place in places:
-        start = cls.sample_prior(np.random.default_rng(0))
-        start[cls.position[0]], start[cls.position[1]] = float(place[0]), float(place[1])
-        found = fitting.scored_fit(sampler, state, cls, make_object(sampler.model, cls, start),
-                                   keep=cls.position, settle=cls.position, shrink=speck)
-        if best is None or found[1] > best[1]:
-            best = found
-    return best
+    winning), and the log joint of the state with it."""
+    start = cls.sample_prior(np.random.default_rng(0))
+    start[cls.position[0]], start[cls.position[1]] = float(seed[0]), float(seed[1])
+    return fitting.scored_fit(sampler, state, cls, make_object(sampler.model, cls, start),
+                              keep=cls.position, settle=cls.position, shrink=speck)
 
 
-def class_choice(sampler, state: Trace, seed, speck: bool = False, lift=None
+def class_choice(sampler, state: Trace, seed, speck: bool = False
                  ) -> tuple[list[dict], np.ndarray]:
     """Every placed class fitted at the seed, and log P(c | x, s) of choosing each
     (``fit.class_log_probs`` of their fits' log joints)."""
-    fits, scores = zip(*(fit_at(sampler, state, cls, seed, speck, lift)
+    fits, scores = zip(*(fit_at(sampler, state, cls, seed, speck)
                          for cls in placed_classes(sampler.model)))
     return list(fits), fitting.class_log_probs(scores)
-
-
-def seed_choice(sampler, state: Trace, s: int) -> tuple[list[dict], np.ndarray]:
-    """``class_choice`` at seed s of ``state``, with what its seed table says of it (a
-    speck, and its lift)."""
-    birth = sampler.birth
-    return class_choice(sampler, state, birth.seeds(state)[s], birth.speck_seeds(state)[s],
-                        birth.seed_lifts(state)[s])
 
 
 @dataclass(frozen=True)
@@ -151,7 +127,7 @@ def propose_fitted_birth(sampler, trace: Trace, rng: np.random.Generator,
     if not len(seeds):
         return None
     s = int(rng.integers(len(seeds))) if seed is None else seed
-    fits, log_p = seed_choice(sampler, state, s)
+    fits, log_p = class_choice(sampler, state, seeds[s], sampler.birth.speck_seeds(state)[s])
     c = fitting.draw_class(rng, log_p) if target is None else \
         fitting.class_index(classes, target.cls)
     cls, fitted = classes[c], fits[c]
@@ -198,7 +174,8 @@ def propose_fitted_death(sampler, trace: Trace, rng: np.random.Generator, k: int
     log_q_back = _log(sampler.jump["fitted_birth"]) - math.log(len(seeds))
 
     def back() -> float:
-        fits, log_p = seed_choice(sampler, state, s)
+        fits, log_p = class_choice(sampler, state, seeds[s],
+                                   sampler.birth.speck_seeds(state)[s])
         c = fitting.class_index(classes, gone.cls)
         return fitting.class_log_prob(log_p, c) + fitting.log_density(classes[c], gone.values,
                                                                       fits[c])

@@ -392,7 +392,8 @@ def fitted_class_rows(sampler: Sampler, state: Trace, rng: np.random.Generator,
     seeds = sampler.birth.seeds(state)
     if not len(seeds):
         return []
-    _, log_p = fitted_birth.seed_choice(sampler, state, 0)
+    _, log_p = fitted_birth.class_choice(sampler, state, seeds[0],
+                                         sampler.birth.speck_seeds(state)[0])
     log_q = np.array([fitting.class_log_prob(log_p, c) for c in range(len(log_p))])
     chosen = [fitting.draw_class(rng, log_p) for _ in range(draws)]
     return choice_rows(f"fitted birth's class of {len(log_p)}", "classes", chosen, log_q)
