@@ -259,42 +259,6 @@ def test_a_speck_beside_a_drawn_edge_is_kept_when_no_rim_of_it_shows_its_colour(
     assert not specks(glint).any()
 
 
-def test_a_sliver_in_the_colour_of_a_drawn_object_is_kept_when_that_object_fits_its_pixels():
-    """A red square drawn on a grey floor, fitting its own pixels: a red sliver a pixel wide
-    along a third of its side (a red sphere peeking out beside a red cube) is kept, since
-    no rim of the square drawn off shows there alone. Not kept: the same sliver when the
-    square is drawn a pixel off (its far side then shows the floor), a rim along the whole
-    side (the square drawn too small), and a dark sliver (a shade of the colours there, as
-    a soft shadow or an anti-aliased edge shows)."""
-    from sppl.infer import birth
-
-    red = (0.45, 0.08, 0.08)
-    rendered = np.full((24, 24, 3), 0.5)
-    rendered[6:15, 8:14] = red
-    square = np.zeros((24, 24), dtype=bool)
-    square[6:15, 8:14] = True
-
-    def specks(observed):
-        off = np.abs(observed - rendered).mean(axis=-1)
-        strong = off > birth.STRONG_COLOUR_GAP
-        beside = birth._Beside(square, observed, rendered, birth.STRONG_COLOUR_GAP)
-        return birth._specks(off > birth.COLOUR_GAP, birth._blobs(off > birth.COLOUR_GAP),
-                             strong, birth._edges(rendered) | square, beside)
-
-    sliver = rendered.copy()
-    sliver[9:12, 14] = (0.6, 0.1, 0.12)
-    assert np.argwhere(specks(sliver)).tolist() == [[9, 14], [10, 14], [11, 14]]
-    shifted = sliver.copy()
-    shifted[6:15, 8] = 0.5
-    assert not specks(shifted)[:, 14].any()
-    whole = rendered.copy()
-    whole[6:15, 14] = (0.6, 0.1, 0.12)
-    assert not specks(whole).any()
-    dark = rendered.copy()
-    dark[9:12, 14] = (0.1, 0.03, 0.03)
-    assert not specks(dark).any()
-
-
 def test_the_cone_distance_is_zero_inside_the_cone_and_grows_outside_it():
     """A point is in the cone of two colours when it is a non-negative mix of them (a blend,
     a shade); a colour of another hue lies the mean absolute difference its nearest such mix

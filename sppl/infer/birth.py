@@ -171,8 +171,8 @@ class BirthProposal:
 
     def speck_seeds(self, trace) -> np.ndarray:
         """Which of ``seeds(trace)`` come from specks (RGB or depth): pieces too small for a
-        blob, apart from what the state draws (or beside it, where no rim of it can show
-        what is seen), where an object a few pixels across stands and not a misplaced object's
+        blob, apart from what the state draws (or beside it, in a colour no rim of it
+        shows), where an object a few pixels across stands and not a misplaced object's
         rim (a fitted birth there may shrink its starts: ``sppl.infer.fit.SHRINK``)."""
         return self._seed_table(trace)[1]
 
@@ -329,8 +329,7 @@ class _Beside:
     a darker or lighter shade of them. Every such colour lies in the cone a u + b v (a, b >=
     0) of two colours u, v the render draws within BESIDE_PIXELS of the piece; a piece whose
     strongly-off pixels lie, on average, further than ``gap`` (a mean absolute difference)
-    from every such cone is something the state does not draw. So is one in the very colour
-    of the objects beside it when no rim of them can show there alone (``_no_rim_of``)."""
+    from every such cone is something the state does not draw."""
 
     def __init__(self, objects: np.ndarray, observed: np.ndarray, rendered: np.ndarray,
                  gap: float) -> None:
@@ -344,46 +343,7 @@ class _Beside:
         # Colours a twentieth apart are one: the cones of near colours are near.
         colours = np.unique(np.round(self.rendered[around] * 20.0), axis=0) / 20.0
         off = self.observed[piece & strong]
-        if _cone_distance(off, colours).mean() > self.gap:
-            return True
-        return self._no_rim_of(piece, strong, around, off)
-
-    def _no_rim_of(self, piece: np.ndarray, strong: np.ndarray, around: np.ndarray,
-                   off: np.ndarray) -> bool:
-        """Whether a piece in the very colour of the objects drawn beside it (within
-        COLOUR_GAP of one they show around it, not a shade or blend) is still no rim of
-        them: they fit their own pixels (none strongly off), so none of them is drawn
-        shifted or turned, which uncovers pixels on one side as it covers them on another,
-        and the piece runs along less than half of the side of them it lies against, where
-        one drawn too small leaves a rim along the whole side. A red sphere's sliver a
-        pixel wide beside a red cube that is drawn right."""
-        grown = ndimage.binary_dilation(piece, structure=_CROSS)
-        labels, _ = ndimage.label(self.objects, structure=_CROSS)
-        near = np.unique(labels[grown & self.objects])
-        if not len(near):
-            return False  # beside a scenery edge: the camera's blend of it
-        beside = np.isin(labels, near)
-        if (beside & strong).any():
-            return False
-        theirs = np.unique(np.round(self.rendered[beside & around] * 20.0), axis=0) / 20.0
-        if np.abs(off[:, None] - theirs[None]).mean(-1).min(1).mean() > COLOUR_GAP:
-            return False
-        # The side it lies against: the step d from the piece onto them most of it takes.
-        steps = [(0, 1), (0, -1), (1, 0), (-1, 0)]
-        onto = [(_shifted(beside, -dy, -dx) & piece).sum() for dy, dx in steps]
-        dy, dx = steps[int(np.argmax(onto))]
-        # Their pixels whose neighbour a step back is not theirs: that side's length.
-        side = beside & ~_shifted(beside, dy, dx)
-        return bool(2 * max(onto) < side.sum())
-
-
-def _shifted(mask: np.ndarray, dy: int, dx: int) -> np.ndarray:
-    """``mask`` moved dy rows down and dx columns right, with nothing moved in."""
-    out = np.zeros_like(mask)
-    h, w = mask.shape
-    out[max(dy, 0):h + min(dy, 0), max(dx, 0):w + min(dx, 0)] = \
-        mask[max(-dy, 0):h + min(-dy, 0), max(-dx, 0):w + min(-dx, 0)]
-    return out
+        return bool(_cone_distance(off, colours).mean() > self.gap)
 
 
 def _cone_distance(points: np.ndarray, colours: np.ndarray) -> np.ndarray:
